@@ -1,0 +1,36 @@
+# Entry points for a fresh machine. `make pipeline` and `make test` create .venv first when needed.
+# lerobot 0.6.1 needs Python 3.12: we take the first 3.12 among python3.12, python3 (pyenv resolves it through
+# .python-version) and pyenv's installs; override with `make PYTHON=/path/to/python3.12 ...`.
+PYTHON ?= $(shell for p in python3.12 python3 $$HOME/.pyenv/versions/3.12*/bin/python3; do \
+	$$p -c 'import sys; sys.exit(sys.version_info[:2] != (3, 12))' 2>/dev/null && { echo $$p; break; }; done)
+VENV := .venv
+BIN := $(CURDIR)/$(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: install pipeline test bench lock clean-venv
+
+install: $(STAMP)
+
+$(STAMP): requirements.lock pyproject.toml
+	@test -n "$(PYTHON)" || { echo "error: Python 3.12 not found (lerobot 0.6.1 needs it); pass PYTHON=/path/to/python3.12" >&2; exit 1; }
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install -q --upgrade pip==26.3
+	$(BIN)/python -m pip install -q -r requirements.lock
+	$(BIN)/python -m pip install -q --no-deps --no-build-isolation -e .
+	touch $@
+
+# The whole default pipeline: collect -> ... as declared in dvc.yaml.
+pipeline: $(STAMP)
+	PATH="$(BIN):$$PATH" dvc repro
+
+test: $(STAMP)
+	PATH="$(BIN):$$PATH" python -m pytest
+
+bench: $(STAMP)
+	PATH="$(BIN):$$PATH" python benchmarks/env_throughput.py
+
+lock: $(STAMP)
+	$(BIN)/python -m pip freeze --exclude-editable > requirements.lock.new && mv requirements.lock.new requirements.lock
+
+clean-venv:
+	rm -rf $(VENV)

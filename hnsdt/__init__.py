@@ -1,0 +1,9 @@
+"""hnsdt: Hierarchical Neuro-Symbolic Decision Transformer, reproduced.
+
+The package follows the paper's Figure 1: ``envs`` (environment) → ``symbolic`` (abstraction φ, planner,
+sub-goals ψ) → ``data`` (segmented LeRobot datasets) → ``models`` (decision transformer) → ``agents``.
+"""
+
+import hnsdt.envs  # noqa: F401  (registers the gymnasium ids)
+
+__version__ = "0.1.0"

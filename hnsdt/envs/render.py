@@ -1,0 +1,75 @@
+"""Text and image renderings of a key–door state, shared by the environments, the dataset tools and the logs."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hnsdt.envs.layout import Layout
+
+CELL_PX = 16
+COLOURS = {
+    "floor": (235, 235, 235),
+    "wall": (60, 60, 60),
+    "goal": (80, 190, 80),
+    "key": (240, 200, 40),
+    "door_closed": (150, 90, 40),
+    "door_open": (215, 185, 150),
+    "item": (70, 130, 230),
+    "agent": (220, 40, 40),
+}
+
+
+def split_state(layout: Layout, state: np.ndarray) -> tuple[tuple[int, int], set[str], set[str], set[str]]:
+    """Observation vector -> (cell, keys held, doors open, items held)."""
+    nk, nd = len(layout.keys), len(layout.doors)
+    flags = np.asarray(state[2:], dtype=bool)
+    keys = {k for k, f in zip(layout.keys, flags[:nk]) if f}
+    doors = {d for d, f in zip(layout.doors, flags[nk : nk + nd]) if f}
+    items = {i for i, f in zip(layout.items, flags[nk + nd :]) if f}
+    return (int(state[0]), int(state[1])), keys, doors, items
+
+
+def symbol_grid(layout: Layout, state: np.ndarray) -> list[list[str]]:
+    """Characters of the current grid: picked keys/items vanish, open doors show lower-case, agent is '@'."""
+    cell, keys, doors, items = split_state(layout, state)
+    grid = [["#" if w else "." for w in row] for row in layout.walls]
+    grid[layout.goal[0]][layout.goal[1]] = "G"
+    for k, (r, c) in layout.keys.items():
+        if k not in keys:
+            grid[r][c] = k
+    for d, (r, c) in layout.doors.items():
+        grid[r][c] = "/" if d in doors else d
+    for i, (r, c) in layout.items.items():
+        if i not in items:
+            grid[r][c] = i
+    grid[cell[0]][cell[1]] = "@"
+    return grid
+
+
+def render_ansi(layout: Layout, state: np.ndarray) -> str:
+    return "\n".join("".join(row) for row in symbol_grid(layout, state)) + "\n"
+
+
+def render_rgb(layout: Layout, state: np.ndarray, cell_px: int = CELL_PX) -> np.ndarray:
+    """An (H*px, W*px, 3) uint8 image: walls, keys, doors (dark closed, pale open), items, goal and agent."""
+    cell, keys, doors, items = split_state(layout, state)
+    h, w = layout.shape
+    img = np.empty((h, w, 3), dtype=np.uint8)
+    img[:] = COLOURS["floor"]
+    img[layout.walls] = COLOURS["wall"]
+    img[layout.goal] = COLOURS["goal"]
+    for k, rc in layout.keys.items():
+        if k not in keys:
+            img[rc] = COLOURS["key"]
+    for d, rc in layout.doors.items():
+        img[rc] = COLOURS["door_open" if d in doors else "door_closed"]
+    for i, rc in layout.items.items():
+        if i not in items:
+            img[rc] = COLOURS["item"]
+    big = np.repeat(np.repeat(img, cell_px, axis=0), cell_px, axis=1)
+    # The agent is a filled disc so the cell underneath (key, door, goal) stays visible at its corners.
+    yy, xx = np.mgrid[0:cell_px, 0:cell_px]
+    disc = (yy - cell_px / 2 + 0.5) ** 2 + (xx - cell_px / 2 + 0.5) ** 2 <= (cell_px * 0.35) ** 2
+    r0, c0 = cell[0] * cell_px, cell[1] * cell_px
+    big[r0 : r0 + cell_px, c0 : c0 + cell_px][disc] = COLOURS["agent"]
+    return big

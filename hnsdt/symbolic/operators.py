@@ -1,0 +1,107 @@
+"""Symbolic operators with preconditions, effects and costs, grounded on a layout.
+
+=================  ===========================================================  ===================  ==============
+operator           preconditions                                                effects              cost
+=================  ===========================================================  ===================  ==============
+GoTo(key k)        ¬HasKey(k), key cell reachable through walls and open doors  At(key cell)         path length
+PickKey(k)         At(key cell), ¬HasKey(k)                                     HasKey(k)            1
+GoTo(door D)       ¬DoorOpen(D), door cell reachable                            At(door cell)        path length
+OpenDoor(D)        At(door cell), HasKey(d), ¬DoorOpen(D)                       DoorOpen(D)          1
+GoTo(item i)       ¬HasItem(i), item cell reachable                             At(item cell)        path length
+PickItem(i)        At(item cell), ¬HasItem(i)                                   HasItem(i)           1
+GoTo(exit)         HasItem(every item), exit reachable                          At(exit), Done       path length
+=================  ===========================================================  ===================  ==============
+
+"Reachable" follows the environment: a closed door cell may be the end of a path but never a step along it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from hnsdt.envs.layout import Cell, Layout, reachable_cells
+from hnsdt.symbolic.abstraction import DONE, SymbolicState, at, door_open, has_item, has_key
+
+GOTO_KEY, PICK_KEY, GOTO_DOOR, OPEN_DOOR, GOTO_ITEM, PICK_ITEM, GOTO_EXIT = (
+    "goto_key", "pick_key", "goto_door", "open_door", "goto_item", "pick_item", "goto_exit")
+GOTO_KINDS = (GOTO_KEY, GOTO_DOOR, GOTO_ITEM, GOTO_EXIT)
+INTERACT_KINDS = (PICK_KEY, OPEN_DOOR, PICK_ITEM)
+
+
+@dataclass(frozen=True)
+class Operator:
+    kind: str
+    obj: str  # key letter, door letter, item digit, or "exit"
+    target: Cell
+    pre: frozenset[str] = field(compare=False)
+    eff: frozenset[str] = field(compare=False)
+    cost: int = field(compare=False, default=1)
+
+    @property
+    def name(self) -> str:
+        return {
+            GOTO_KEY: f"GoTo(key {self.obj})", PICK_KEY: f"PickKey({self.obj})",
+            GOTO_DOOR: f"GoTo(door {self.obj})", OPEN_DOOR: f"OpenDoor({self.obj})",
+            GOTO_ITEM: f"GoTo(item {self.obj})", PICK_ITEM: f"PickItem({self.obj})",
+            GOTO_EXIT: "GoTo(exit)",
+        }[self.kind]
+
+    def __str__(self) -> str:
+        return self.name
+
+    def achieved(self, predicates: frozenset[str]) -> bool:
+        """The paper's completion test: φ(s) ⊇ eff(o)."""
+        return self.eff <= predicates
+
+
+def apply(op: Operator, s: SymbolicState) -> SymbolicState:
+    if op.kind in GOTO_KINDS:
+        return SymbolicState(op.target, s.keys, s.doors, s.items)
+    if op.kind == PICK_KEY:
+        return SymbolicState(s.cell, s.keys | {op.obj}, s.doors, s.items)
+    if op.kind == OPEN_DOOR:
+        return SymbolicState(s.cell, s.keys, s.doors | {op.obj}, s.items)
+    return SymbolicState(s.cell, s.keys, s.doors, s.items | {op.obj})
+
+
+def goto(kind: str, obj: str, target: Cell, dist: int, extra_pre: frozenset[str] = frozenset()) -> Operator:
+    eff = {at(target)} | ({DONE} if kind == GOTO_EXIT else set())
+    return Operator(kind, obj, target, extra_pre, frozenset(eff), dist)
+
+
+def interaction(layout: Layout, kind: str, obj: str) -> Operator:
+    if kind == PICK_KEY:
+        cell = layout.keys[obj]
+        return Operator(kind, obj, cell, frozenset({at(cell)}), frozenset({has_key(obj)}))
+    if kind == OPEN_DOOR:
+        cell = layout.doors[obj]
+        return Operator(kind, obj, cell, frozenset({at(cell), has_key(obj.lower())}), frozenset({door_open(obj)}))
+    cell = layout.items[obj]
+    return Operator(kind, obj, cell, frozenset({at(cell)}), frozenset({has_item(obj)}))
+
+
+def applicable(layout: Layout, s: SymbolicState) -> list[Operator]:
+    """Every operator whose preconditions hold in ``s``, in a fixed order (keys, doors, items, exit)."""
+    ops: list[Operator] = []
+    for k, cell in layout.keys.items():
+        if k not in s.keys and s.cell == cell:
+            ops.append(interaction(layout, PICK_KEY, k))
+    for d, cell in layout.doors.items():
+        if d not in s.doors and s.cell == cell and d.lower() in s.keys:
+            ops.append(interaction(layout, OPEN_DOOR, d))
+    for i, cell in layout.items.items():
+        if i not in s.items and s.cell == cell:
+            ops.append(interaction(layout, PICK_ITEM, i))
+    dist = reachable_cells(layout, s.cell, set(s.doors))
+    candidates = (
+        [(GOTO_KEY, k, c) for k, c in layout.keys.items() if k not in s.keys]
+        + [(GOTO_DOOR, d, c) for d, c in layout.doors.items() if d not in s.doors]
+        + [(GOTO_ITEM, i, c) for i, c in layout.items.items() if i not in s.items]
+    )
+    for kind, obj, cell in candidates:
+        if cell != s.cell and cell in dist:
+            ops.append(goto(kind, obj, cell, dist[cell]))
+    if s.items >= set(layout.items) and layout.goal in dist and s.cell != layout.goal:
+        pre = frozenset(has_item(i) for i in layout.items)
+        ops.append(goto(GOTO_EXIT, "exit", layout.goal, dist[layout.goal], pre))
+    return ops
