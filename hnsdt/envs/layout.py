@@ -23,6 +23,7 @@ import numpy as np
 WALL, FLOOR, START, GOAL = "#", ".", "@", "G"
 MOVES = ((-1, 0), (0, 1), (1, 0), (0, -1))  # action 0 up, 1 right, 2 down, 3 left
 BUILTIN_LAYOUTS = ("keydoor_5x5", "multikeydoor_9x9")
+_LEGEND = {WALL, FLOOR, START, GOAL}
 
 
 class LayoutError(ValueError):
@@ -153,7 +154,7 @@ def load_layout(spec: str | Path | Layout) -> Layout:
     if isinstance(spec, Layout):
         return spec
     spec_str = str(spec)
-    if "\n" in spec_str:
+    if "\n" in spec_str or (START in spec_str and all(ch in _LEGEND or ch.isalnum() for ch in spec_str)):
         return parse_layout(spec_str)
     if spec_str in BUILTIN_LAYOUTS:
         text = resources.files("hnsdt.envs.layouts").joinpath(f"{spec_str}.txt").read_text()

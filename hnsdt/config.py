@@ -1,0 +1,124 @@
+"""params.yaml: the one place for knobs. Loaded and checked here so a bad value fails with one clear line."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from hnsdt.agents.executor import ExecutorConfig
+from hnsdt.data.collect import POLICIES, STARTS, Behaviour, CollectConfig
+from hnsdt.envs import ENV_IDS, LayoutError, load_layout
+from hnsdt.symbolic.planner import PLAN_MODES
+
+
+class ParamsError(ValueError):
+    """A malformed params file; the message names the file and the key."""
+
+
+def load_params(path: str | Path = "params.yaml") -> dict[str, Any]:
+    path = Path(path)
+    if not path.is_file():
+        raise ParamsError(f"{path}: no such params file")
+    try:
+        params = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        mark = getattr(e, "problem_mark", None)
+        where = f" at line {mark.line + 1}" if mark else ""
+        raise ParamsError(f"{path}: not valid YAML{where}") from None
+    if not isinstance(params, dict):
+        raise ParamsError(f"{path}: expected a mapping of sections at the top level")
+    params["_path"] = str(path)
+    return params
+
+
+def _get(params: dict, dotted: str, kind: type | tuple, default: Any = ...) -> Any:
+    node: Any = params
+    for part in dotted.split("."):
+        if not isinstance(node, dict) or part not in node:
+            if default is not ...:
+                return default
+            raise ParamsError(f"{params.get('_path', 'params')}: missing key {dotted}")
+        node = node[part]
+    if kind is float and isinstance(node, int) and not isinstance(node, bool):
+        node = float(node)
+    if not isinstance(node, kind) or (isinstance(node, bool) and kind in (int, float)):
+        names = kind.__name__ if isinstance(kind, type) else "/".join(k.__name__ for k in kind)
+        raise ParamsError(f"{params.get('_path', 'params')}: {dotted} must be {names}, got {node!r}")
+    return node
+
+
+def _fail(params: dict, msg: str) -> ParamsError:
+    return ParamsError(f"{params.get('_path', 'params')}: {msg}")
+
+
+def env_names(params: dict) -> list[str]:
+    return list(_get(params, "envs", dict))
+
+
+def env_settings(params: dict, name: str) -> dict:
+    envs = _get(params, "envs", dict)
+    if name not in envs:
+        raise _fail(params, f"unknown env {name!r}; params defines {', '.join(envs) or 'none'}")
+    env_id = _get(params, f"envs.{name}.id", str)
+    if env_id not in ENV_IDS:
+        raise _fail(params, f"envs.{name}.id {env_id!r} is not a registered id ({', '.join(ENV_IDS)})")
+    layout_spec = _get(params, f"envs.{name}.layout", str)
+    try:
+        layout = load_layout(layout_spec)
+    except LayoutError as e:
+        raise _fail(params, f"envs.{name}.layout: {e}") from None
+    max_steps = _get(params, f"envs.{name}.max_steps", int)
+    if max_steps < 1:
+        raise _fail(params, f"envs.{name}.max_steps must be >= 1, got {max_steps}")
+    return {"name": name, "id": env_id, "layout": layout, "max_steps": max_steps}
+
+
+def executor_config(params: dict) -> ExecutorConfig:
+    mode = _get(params, "planner.mode", str, "cost")
+    if mode not in PLAN_MODES:
+        raise _fail(params, f"planner.mode must be one of {PLAN_MODES}, got {mode!r}")
+    factor = _get(params, "planner.allowance_factor", float, 3.0)
+    minimum = _get(params, "planner.allowance_min", int, 6)
+    if factor <= 0 or minimum < 1:
+        raise _fail(params, "planner.allowance_factor must be > 0 and planner.allowance_min >= 1")
+    return ExecutorConfig(plan_mode=mode, allowance_factor=factor, allowance_min=minimum)
+
+
+def fail_probs(params: dict, key: str) -> list[float]:
+    values = _get(params, key, list)
+    if not values or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v <= 1
+                             for v in values):
+        raise _fail(params, f"{key} must be a non-empty list of numbers in [0, 1], got {values!r}")
+    return [float(v) for v in values]
+
+
+def collect_config(params: dict, name: str) -> CollectConfig:
+    env = env_settings(params, name)
+    behaviours = []
+    for i, b in enumerate(_get(params, "collect.behaviours", list)):
+        if not isinstance(b, dict):
+            raise _fail(params, f"collect.behaviours[{i}] must be a mapping")
+        unknown = set(b) - {"policy", "episodes", "start", "epsilon"}
+        if unknown:
+            raise _fail(params, f"collect.behaviours[{i}]: unknown keys {sorted(unknown)}")
+        if b.get("policy") not in POLICIES:
+            raise _fail(params, f"collect.behaviours[{i}].policy must be one of {POLICIES}, got {b.get('policy')!r}")
+        if b.get("start", "layout") not in STARTS:
+            raise _fail(params, f"collect.behaviours[{i}].start must be one of {STARTS}, got {b.get('start')!r}")
+        episodes = b.get("episodes")
+        if not isinstance(episodes, int) or isinstance(episodes, bool) or episodes < 0:
+            raise _fail(params, f"collect.behaviours[{i}].episodes must be an integer >= 0, got {episodes!r}")
+        eps = b.get("epsilon", 0.0)
+        if not isinstance(eps, (int, float)) or not 0 <= eps <= 1:
+            raise _fail(params, f"collect.behaviours[{i}].epsilon must be in [0, 1], got {eps!r}")
+        behaviours.append(Behaviour(b["policy"], episodes, b.get("start", "layout"), float(eps)))
+    fps = _get(params, "collect.fps", int, 10)
+    if fps < 1:
+        raise _fail(params, f"collect.fps must be >= 1, got {fps}")
+    return CollectConfig(
+        env_id=env["id"], layout=env["layout"], max_steps=env["max_steps"],
+        fail_probs=fail_probs(params, "collect.fail_probs"), behaviours=behaviours,
+        seed=_get(params, "collect.seed", int), fps=fps, executor=executor_config(params),
+    )

@@ -1,0 +1,169 @@
+"""Collect exploration trajectories for one environment and write them as a LeRobot dataset.
+
+Behaviours (each a list entry of ``collect.behaviours`` in params.yaml):
+
+* ``random``: uniform random actions (the paper's exploration); sub-goals labelled in hindsight.
+* ``noisy_planner``: the symbolic agent (plan + shortest-path controllers) with each action replaced by a
+  uniform one with probability ``epsilon``; sub-goals are the operators it was executing.
+
+``start: layout`` starts at ``@``; ``start: random`` starts on a random free cell (never a closed door or the
+exit) with every key/door/item flag drawn at random, which covers sub-goals from many situations. Episodes of
+each behaviour are split evenly over ``fail_probs``. Everything is seeded from ``seed``: same settings, same
+files.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from hnsdt.agents.executor import ExecutorConfig
+from hnsdt.agents.rollout import Episode, RandomAgent, rollout
+from hnsdt.agents.symbolic import SymbolicAgent
+from hnsdt.data.segmentation import hindsight_labels
+from hnsdt.envs.layout import Layout
+from hnsdt.envs.vector import KeyDoorVectorEnv
+from hnsdt.symbolic.subgoals import ID_TO_NAME
+
+POLICIES = ("random", "noisy_planner")
+STARTS = ("layout", "random")
+
+
+@dataclass
+class Behaviour:
+    policy: str
+    episodes: int
+    start: str = "layout"
+    epsilon: float = 0.0
+
+    def __post_init__(self):
+        if self.policy not in POLICIES:
+            raise ValueError(f"unknown behaviour policy {self.policy!r}; expected one of {POLICIES}")
+        if self.start not in STARTS:
+            raise ValueError(f"unknown start {self.start!r}; expected one of {STARTS}")
+        if int(self.episodes) < 0:
+            raise ValueError(f"episodes must be >= 0, got {self.episodes}")
+        if not 0.0 <= float(self.epsilon) <= 1.0:
+            raise ValueError(f"epsilon must be in [0, 1], got {self.epsilon}")
+
+    @property
+    def label(self) -> str:
+        eps = f", epsilon={self.epsilon:g}" if self.policy == "noisy_planner" else ""
+        return f"{self.policy}(start={self.start}{eps})"
+
+
+@dataclass
+class CollectConfig:
+    env_id: str
+    layout: Layout
+    max_steps: int
+    fail_probs: list[float]
+    behaviours: list[Behaviour]
+    seed: int = 0
+    fps: int = 10
+    executor: ExecutorConfig = field(default_factory=ExecutorConfig)
+
+
+def random_start_states(layout: Layout, n: int, rng: np.random.Generator) -> np.ndarray:
+    flags = rng.integers(0, 2, size=(n, layout.n_flags))
+    nk, nd = len(layout.keys), len(layout.doors)
+    door_cells = list(layout.doors.values())
+    cells = [c for c in layout.free_cells() if c != layout.goal]
+    states = np.zeros((n, 2 + layout.n_flags), dtype=np.int64)
+    states[:, 2:] = flags
+    for i in range(n):
+        while True:
+            cell = cells[rng.integers(len(cells))]
+            if cell not in door_cells or flags[i, nk + door_cells.index(cell)]:
+                break  # a closed door cell would trap the agent from step 0
+        states[i, :2] = cell
+    return states
+
+
+def _batch_seed(seed: int, *parts: int) -> int:
+    return int(np.random.SeedSequence([seed, *parts]).generate_state(1)[0])
+
+
+def collect_episodes(cfg: CollectConfig, progress: bool = True) -> list[dict]:
+    """Run every behaviour × fail_prob batch; return episode dicts ready for :func:`write_dataset`."""
+    out: list[dict] = []
+    jobs = [(b, bi, f, fi) for bi, b in enumerate(cfg.behaviours) for fi, f in enumerate(cfg.fail_probs)]
+    bar = tqdm(jobs, desc=f"collect {cfg.env_id}", disable=not progress, unit="batch")
+    for b, bi, fail_prob, fi in bar:
+        n = b.episodes // len(cfg.fail_probs) + (1 if fi < b.episodes % len(cfg.fail_probs) else 0)
+        if n == 0:
+            continue
+        seed = _batch_seed(cfg.seed, bi, fi)
+        rng = np.random.default_rng(seed)
+        env = KeyDoorVectorEnv(n, cfg.layout, fail_prob, cfg.max_steps)
+        starts = random_start_states(cfg.layout, n, rng) if b.start == "random" else None
+        if b.policy == "random":
+            episodes = rollout(env, RandomAgent(seed), seed, starts)
+        else:
+            episodes = rollout(env, SymbolicAgent(cfg.layout, cfg.executor), seed, starts, epsilon=b.epsilon)
+        for i, ep in enumerate(episodes):
+            out.append(_episode_record(cfg, b, fail_prob, seed, i, ep))
+    return out
+
+
+def _episode_record(cfg: CollectConfig, b: Behaviour, fail_prob: float, seed: int, i: int, ep: Episode) -> dict:
+    if b.policy == "random":
+        ids, targets = hindsight_labels(cfg.layout, ep.states)
+    else:
+        ids, targets = ep.subgoal_ids, ep.subgoal_targets
+    return {
+        "states": ep.states, "actions": ep.actions, "rewards": ep.rewards, "success": ep.success,
+        "subgoal_ids": ids, "subgoal_targets": targets,
+        "meta": {
+            "env_id": cfg.env_id, "layout": cfg.layout.name, "fail_prob": float(fail_prob), "seed": seed,
+            "batch_index": i, "policy": b.policy, "behaviour": b.label, "start": b.start,
+            "epsilon": float(b.epsilon), "success": bool(ep.success), "length": ep.length, "return": ep.ret,
+        },
+    }
+
+
+def dataset_card(cfg: CollectConfig, episodes: list[dict], repo_id: str) -> str:
+    frames = Counter()
+    for ep in episodes:
+        frames.update(ID_TO_NAME[int(i)] for i in ep["subgoal_ids"])
+    by_behaviour: dict[tuple[str, float], list[bool]] = {}
+    for ep in episodes:
+        m = ep["meta"]
+        by_behaviour.setdefault((m["behaviour"], m["fail_prob"]), []).append(m["success"])
+    total = sum(frames.values())
+    lines = [
+        f"# {repo_id}", "",
+        f"Exploration data for `{cfg.env_id}` on layout `{cfg.layout.name}` (LeRobot v3.0, written by hnsdt).",
+        f"Load it offline with `LeRobotDataset({repo_id!r}, root=<this folder>)`.", "",
+        "```", cfg.layout.text.rstrip(), "```", "",
+        f"- episodes: {len(episodes)}, frames: {total}, fps: {cfg.fps}, max_steps: {cfg.max_steps}, "
+        f"seed: {cfg.seed}",
+        f"- fail_probs: {', '.join(f'{f:g}' for f in cfg.fail_probs)}", "",
+        "## Behaviour success rate", "",
+        "| behaviour | fail_prob | episodes | success |", "|---|---|---|---|",
+    ]
+    for (label, f), succ in sorted(by_behaviour.items()):
+        lines.append(f"| {label} | {f:g} | {len(succ)} | {np.mean(succ):.3f} |")
+    lines += ["", "## Coverage: frames per sub-goal", "", "| sub-goal | frames | share |", "|---|---|---|"]
+    for name, count in sorted(frames.items(), key=lambda kv: ID_TO_NAME.index(kv[0])):
+        lines.append(f"| {name} | {count} | {count / total:.3f} |")
+    return "\n".join(lines) + "\n"
+
+
+def collect_dataset(cfg: CollectConfig, root: str | Path, repo_id: str, progress: bool = True) -> Path:
+    episodes = collect_episodes(cfg, progress)
+    if not episodes:
+        raise ValueError("collect: no episodes requested (every behaviour has episodes: 0)")
+    meta = {
+        "repo_id": repo_id, "env_id": cfg.env_id, "layout": cfg.layout.name, "max_steps": cfg.max_steps,
+        "fps": cfg.fps, "seed": cfg.seed, "fail_probs": list(cfg.fail_probs),
+        "behaviours": [vars(b) for b in cfg.behaviours], "executor": vars(cfg.executor),
+    }
+    from hnsdt.data.lerobot_io import write_dataset  # lerobot takes seconds to import: only when writing
+
+    card = dataset_card(cfg, episodes, repo_id)
+    return write_dataset(root, repo_id, cfg.layout, episodes, cfg.fps, meta, card, progress=progress)

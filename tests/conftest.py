@@ -1,0 +1,30 @@
+import os
+import tempfile
+
+# Nothing may reach a model/dataset hub from the tests: a private, empty HF home and offline mode.
+os.environ["HF_HOME"] = tempfile.mkdtemp(prefix="hnsdt-hf-home-")
+os.environ["HF_HUB_OFFLINE"] = "1"
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import hnsdt  # noqa: E402,F401  (registers the environments)
+from hnsdt.envs import load_layout  # noqa: E402
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+@pytest.fixture(scope="session")
+def keydoor():
+    return load_layout("keydoor_5x5")
+
+
+@pytest.fixture(scope="session")
+def multikeydoor():
+    return load_layout("multikeydoor_9x9")
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(1234)

@@ -1,0 +1,61 @@
+import subprocess
+import sys
+
+import pytest
+
+from conftest import REPO
+
+
+def hnsdt(*args, cwd=REPO):
+    return subprocess.run([sys.executable, "-m", "hnsdt.cli", *args], cwd=cwd, capture_output=True, text=True)
+
+
+def test_plan_prints_operators_and_subgoals():
+    out = hnsdt("plan", "--env", "keydoor")
+    assert out.returncode == 0, out.stderr
+    assert "GoTo(key a)" in out.stdout and "OpenDoor(A)" in out.stdout
+    assert "5 operators, cost 14 steps" in out.stdout
+
+
+def test_plan_from_a_given_state():
+    out = hnsdt("plan", "--env", "hnsdt/KeyDoor-v0", "--state", "4,0,1,0")
+    assert out.returncode == 0 and "PickKey" not in out.stdout and "3 operators" in out.stdout
+
+
+def test_help_explains_itself():
+    out = hnsdt("--help")
+    assert out.returncode == 0 and "plan" in out.stdout and "collect" in out.stdout and "pddl" in out.stdout
+
+
+BAD_PARAMS = [
+    ("envs: [unclosed", "not valid YAML"),
+    ("envs:\n  keydoor:\n    id: hnsdt/Nope-v0\n    layout: keydoor_5x5\n    max_steps: 10\n", "not a registered id"),
+    ("envs:\n  keydoor:\n    id: hnsdt/KeyDoor-v0\n    layout: '@a#G'\n    max_steps: 10\n", "no path"),
+    ("envs:\n  keydoor:\n    id: hnsdt/KeyDoor-v0\n    layout: keydoor_5x5\n    max_steps: ten\n",
+     "max_steps must be int"),
+]
+
+
+@pytest.mark.parametrize("text,match", BAD_PARAMS)
+def test_bad_params_give_one_error_line_and_no_output(tmp_path, text, match):
+    params = tmp_path / "params.yaml"
+    params.write_text(text + "collect:\n  seed: 0\n  fail_probs: [0.1]\n  behaviours: []\n")
+    out_dir = tmp_path / "out"
+    out = hnsdt("--params", str(params), "collect", "--env", "keydoor", "--out", str(out_dir))
+    assert out.returncode == 2
+    lines = out.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("hnsdt: error:") and match in lines[0], out.stderr
+    assert not out_dir.exists() and list(tmp_path.iterdir()) == [params]
+
+
+def test_unknown_behaviour_policy(tmp_path):
+    text = open(f"{REPO}/params.yaml").read().replace("policy: random", "policy: teleport")
+    params = tmp_path / "params.yaml"
+    params.write_text(text)
+    out = hnsdt("--params", str(params), "collect", "--env", "keydoor", "--out", str(tmp_path / "o"))
+    assert out.returncode == 2 and "collect.behaviours[0].policy must be one of" in out.stderr
+
+
+def test_unknown_env_name():
+    out = hnsdt("plan", "--env", "nowhere")
+    assert out.returncode == 2 and "unknown env 'nowhere'" in out.stderr

@@ -1,0 +1,150 @@
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+from conftest import REPO
+from hnsdt.data.collect import Behaviour, CollectConfig, collect_dataset, random_start_states
+from hnsdt.data.lerobot_io import DatasetError, check_dataset, episode_table, open_dataset
+from hnsdt.data.segmentation import hindsight_labels, segments_of
+from hnsdt.symbolic import NAME_TO_ID
+
+
+def test_hindsight_labels_end_segments_where_effects_are_gained(keydoor):
+    states = np.array([[2, 0, 0, 0], [3, 0, 0, 0], [4, 0, 0, 0], [4, 0, 1, 0], [3, 0, 1, 0], [3, 1, 1, 0]])
+    ids, targets = hindsight_labels(keydoor, states)
+    assert [int(i) for i in ids] == [NAME_TO_ID["GoTo(key a)"]] * 2 + [NAME_TO_ID["PickKey(a)"]] + [0, 0]
+    assert targets[0].tolist() == [4, 0] and targets[-1].tolist() == [-1, -1]
+    assert segments_of(ids) == [(NAME_TO_ID["GoTo(key a)"], 0, 2), (NAME_TO_ID["PickKey(a)"], 2, 3), (0, 3, 5)]
+
+
+def test_random_start_states_never_trap(multikeydoor, rng):
+    states = random_start_states(multikeydoor, 500, rng)
+    door_cells = {tuple(c): j for j, c in enumerate(multikeydoor.doors.values())}
+    for s in states:
+        cell = (s[0], s[1])
+        assert not multikeydoor.walls[cell] and cell != multikeydoor.goal
+        if cell in door_cells:
+            assert s[2 + len(multikeydoor.keys) + door_cells[cell]] == 1
+
+
+def _small_config(layout, seed=0):
+    return CollectConfig("hnsdt/MultiKeyDoor-v0", layout, 60, [0.0, 0.2],
+                         [Behaviour("random", 4, "random"), Behaviour("noisy_planner", 6, "layout", 0.1)], seed=seed)
+
+
+@pytest.fixture(scope="module")
+def small_dataset(tmp_path_factory, multikeydoor):
+    root = tmp_path_factory.mktemp("ds") / "multi"
+    collect_dataset(_small_config(multikeydoor), root, "local/multi", progress=False)
+    return root
+
+
+def test_round_trip_through_stock_lerobot(small_dataset, multikeydoor):
+    ds = LeRobotDataset("local/multi", root=small_dataset)
+    table = episode_table(small_dataset)
+    assert ds.meta.total_episodes == len(table) == 10
+    assert ds.meta.info.codebase_version == "v3.0"
+    assert ds.features["observation.state"]["names"] == multikeydoor.state_names
+    frame = ds[0]
+    assert frame["observation.state"].tolist() == [0, 0, 0, 0, 0, 0, 0, 0] or table.loc[0, "start"] == "random"
+    assert frame["task"] in json.loads((small_dataset / "meta/hnsdt.json").read_text())["subgoal_vocabulary"]
+    # Frames are the collected transitions: each next state follows from the dynamics, tasks match sub-goal ids.
+    vocab = json.loads((small_dataset / "meta/hnsdt.json").read_text())["subgoal_vocabulary"]
+    hf = ds.hf_dataset.with_format("numpy")[:]
+    tasks = ds.meta.tasks.reset_index().set_index("task_index")["task"]
+    for i in range(len(ds)):
+        assert tasks[int(hf["task_index"][i])] == vocab[int(np.ravel(hf["subgoal"][i])[0])]
+    # Episode metadata: env, layout, fail_prob, seed, behaviour.
+    assert set(table.columns) >= {"env_id", "layout", "fail_prob", "seed", "policy", "behaviour", "success"}
+    assert sorted(table.fail_prob.unique()) == [0.0, 0.2]
+    planner = table[table.policy == "noisy_planner"]
+    assert planner.success.all()  # epsilon 0.1 with replanning still always succeeds in 60 steps
+
+
+def test_context_windows_via_delta_timestamps(small_dataset):
+    h = 4
+    ds = LeRobotDataset("local/multi", root=small_dataset,
+                        delta_timestamps={"observation.state": [-k / 10 for k in range(h, -1, -1)],
+                                          "action": [-k / 10 for k in range(h, 0, -1)]})
+    first, later = ds[0], ds[h + 2]
+    assert first["observation.state"].shape == (h + 1, 8)
+    assert first["observation.state_is_pad"].tolist() == [True] * h + [False]
+    assert not later["observation.state_is_pad"].any()
+    plain = LeRobotDataset("local/multi", root=small_dataset)
+    assert later["observation.state"][-1].tolist() == plain[h + 2]["observation.state"].tolist()
+    assert later["action"][-1].item() == plain[h + 1]["action"].item()
+
+
+def _effect(name: str, target) -> str:
+    if name == "GoTo(exit)":
+        return "Done"
+    if name.startswith("GoTo"):
+        return f"At({target[0]},{target[1]})"
+    kind, obj = name[:-1].split("(")
+    return {"PickKey": "HasKey", "OpenDoor": "DoorOpen", "PickItem": "HasItem"}[kind] + f"({obj})"
+
+
+def test_subgoal_segments_end_where_effects_are_gained(small_dataset, multikeydoor):
+    from hnsdt.symbolic.abstraction import SymbolicState
+
+    ds = open_dataset(small_dataset)
+    policy = episode_table(small_dataset).set_index("episode_index")["policy"]
+    hf = ds.hf_dataset.with_format("numpy")[:]
+    states, subgoals = hf["observation.state"], np.ravel(hf["subgoal"])
+    targets, eps = hf["subgoal.target"], hf["episode_index"]
+    vocab = json.loads((small_dataset / "meta/hnsdt.json").read_text())["subgoal_vocabulary"]
+    ends = {"random": [], "noisy_planner": []}
+    for t in range(len(states)):
+        last_of_episode = t == len(states) - 1 or eps[t] != eps[t + 1]
+        if subgoals[t] == 0 or (not last_of_episode and subgoals[t] == subgoals[t + 1]):
+            continue
+        after = states[t] if last_of_episode else states[t + 1]
+        if last_of_episode:  # the episode's final transition: its next state is not stored as a frame
+            continue
+        preds = SymbolicState.from_observation(multikeydoor, after).predicates(multikeydoor)
+        ends[policy[int(eps[t])]].append(_effect(vocab[subgoals[t]], targets[t]) in preds)
+    assert ends["random"] and all(ends["random"])  # hindsight: a segment ends exactly where its effect holds
+    assert ends["noisy_planner"] and np.mean(ends["noisy_planner"]) > 0.8  # the rest are replans
+
+
+def test_same_seed_same_files(tmp_path):
+    params = tmp_path / "params.yaml"
+    params.write_text((REPO + "/params.yaml") and open(REPO + "/params.yaml").read().replace(
+        "episodes: 60", "episodes: 4").replace("episodes: 120", "episodes: 4"))
+    outs = []
+    for run in ("a", "b"):
+        out = tmp_path / run
+        subprocess.run([sys.executable, "-m", "hnsdt.cli", "--params", str(params), "collect", "--env", "keydoor",
+                        "--out", str(out), "--quiet"], check=True, cwd=REPO, capture_output=True)
+        outs.append(out)
+    files = sorted(p.relative_to(outs[0]) for p in outs[0].rglob("*") if p.is_file())
+    assert files and files == sorted(p.relative_to(outs[1]) for p in outs[1].rglob("*") if p.is_file())
+    for rel in files:
+        assert (outs[0] / rel).read_bytes() == (outs[1] / rel).read_bytes(), rel
+
+
+def test_corrupt_or_missing_datasets_fail_clearly(small_dataset, tmp_path):
+    import shutil
+
+    with pytest.raises(DatasetError, match="no such folder"):
+        check_dataset(tmp_path / "nothing")
+    broken = tmp_path / "broken"
+    shutil.copytree(small_dataset, broken)
+    (broken / "meta/hnsdt_episodes.parquet").unlink()
+    with pytest.raises(DatasetError, match="missing meta/hnsdt_episodes.parquet"):
+        check_dataset(broken)
+    shutil.rmtree(broken)
+    shutil.copytree(small_dataset, broken)
+    (broken / "meta/info.json").write_text("{ not json")
+    with pytest.raises(DatasetError, match="corrupt JSON"):
+        open_dataset(broken)
+    shutil.rmtree(broken)
+    shutil.copytree(small_dataset, broken)
+    for f in (broken / "data").rglob("*.parquet"):
+        f.write_bytes(b"garbage")
+    with pytest.raises(DatasetError, match="LeRobot cannot read it"):
+        open_dataset(broken)
