@@ -1,4 +1,5 @@
-"""The ``hnsdt`` command: inspect environments and plans, export PDDL, collect datasets.
+"""The ``hnsdt`` command: inspect environments and plans, export PDDL, and run each pipeline stage (collect,
+train, evaluate, report) or replay an episode.
 
 Every subcommand reads its knobs from params.yaml (``--params``); bad input ends with one ``hnsdt: error:``
 line and exit status 2.
@@ -88,6 +89,112 @@ def cmd_collect(args) -> None:
     print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
 
 
+def cmd_train(args) -> None:
+    import shutil
+    import tempfile
+
+    import numpy as np
+    import pandas as pd
+
+    from hnsdt.config import load_params, model_config, train_settings
+    from hnsdt.data.windows import load_frames
+    from hnsdt.evaluation.evaluate import LEARNED
+    from hnsdt.models.train import train_seeds
+
+    params = load_params(args.params)
+    ts = train_settings(params)
+    if args.env not in ts["envs"]:
+        raise ValueError(f"env {args.env!r} is not in train.envs {ts['envs']}")
+    if args.method not in ts["methods"]:
+        raise ValueError(f"method {args.method!r} is not in train.methods {ts['methods']}")
+    model_cfg = model_config(params, args.env, LEARNED[args.method])
+    dataset = Path(args.dataset or f"data/datasets/{args.env}")
+    frames = load_frames(dataset)
+    starts = np.unique(frames.episode_start)
+    extra = {"env": args.env, "method": args.method, "dataset": str(dataset),
+             "target_return": float(frames.returns_to_go[starts].max())}  # pure DT: the best return in the data
+    out = Path(args.out or f"models/{args.env}/{args.method}")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        curves = train_seeds(frames, model_cfg, ts["config"], ts["seeds"], tmp, ts["workers"], extra)
+        if out.exists():
+            shutil.rmtree(out)
+        tmp.replace(out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    rows = [dict(row, seed=seed) for seed, curve in sorted(curves.items()) for row in curve]
+    plot = Path(args.curve or f"plots/train/{args.env}-{args.method}.csv")
+    plot.parent.mkdir(parents=True, exist_ok=True)
+    pd.DataFrame(rows)[["seed", "step", "epoch", "windows_seen", "loss"]].to_csv(plot, index=False)
+    final = {seed: curve[-1]["loss"] for seed, curve in curves.items()}
+    print(f"trained {args.method} on {args.env}: seeds {sorted(final)}, final loss "
+          + ", ".join(f"{v:.4f}" for _, v in sorted(final.items())) + f" -> {out}")
+
+
+def cmd_evaluate(args) -> None:
+    from hnsdt.config import env_settings, evaluate_settings, executor_config, load_params
+    from hnsdt.evaluation.evaluate import evaluate_all, summary
+
+    params = load_params(args.params)
+    settings = evaluate_settings(params)
+    envs = {e: env_settings(params, e) for e in settings["envs"]}
+    table = evaluate_all(settings, envs, executor_config(params), args.models, args.out, progress=not args.quiet)
+    summ = summary(table)
+    print(summ[["method", "env", "fail_prob", "success_mean", "steps_mean", "reward_mean"]].to_string(
+        index=False, float_format=lambda v: f"{v:.3f}"))
+
+
+def cmd_report(args) -> None:
+    from hnsdt.config import load_params
+    from hnsdt.evaluation.report import write_report
+
+    path = write_report(load_params(args.params), Path(args.results), Path(args.out))
+    print(f"wrote {path}")
+
+
+def cmd_replay(args) -> None:
+    import shutil
+    import subprocess
+
+    import pandas as pd
+
+    if args.dataset is not None:
+        from hnsdt.logs import record_from_dataset, write_mcap, write_rrd
+
+        rec = record_from_dataset(args.dataset, args.episode)
+        out = Path(args.out or f"{Path(args.dataset).name}-ep{args.episode}.rrd")
+        write_rrd(out, rec, episode_index=args.episode)
+        write_mcap(out.with_suffix(".mcap"), rec)
+        paths = [out, out.with_suffix(".mcap")]
+        print(f"episode {args.episode} of {args.dataset}: {rec.length} frames, success={rec.success}, "
+              f"sub-goals: {' -> '.join(s[0] for s in rec.segments) or 'none'}")
+    else:
+        table_path = Path(args.results) / "episodes.csv"
+        if not table_path.is_file():
+            raise FileNotFoundError(f"{table_path}: no evaluation results (run `dvc repro evaluate`)")
+        table = pd.read_csv(table_path, keep_default_na=False)
+        row = table[table.episode_id == args.episode_id]
+        if row.empty:
+            raise ValueError(f"no episode {args.episode_id!r} in {table_path} (ids look like "
+                             f"{table.episode_id.iloc[0]!r})")
+        row = row.iloc[0]
+        print(f"{row.episode_id}: success={row.success}, steps={row.steps}, reward={row.reward}, "
+              f"replans={row.replans}")
+        if not row.rrd:
+            raise ValueError(f"episode {args.episode_id} was not recorded (logs.episodes_per_cell in params.yaml "
+                             "sets how many episodes per cell are; recorded ones have rrd/mcap in episodes.csv)")
+        paths = [Path(args.results).parent / row.rrd, Path(args.results).parent / row.mcap]
+    for p in paths:
+        print(f"  {p}")
+    print(f"open with: rerun {paths[0]}   (or load {paths[1]} in Foxglove)")
+    if args.open:
+        viewer = shutil.which("rerun")
+        if viewer is None:
+            raise FileNotFoundError("the rerun viewer is not on PATH (it ships with rerun-sdk in .venv/bin)")
+        subprocess.Popen([viewer, str(paths[0])])
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="hnsdt", description="Hierarchical Neuro-Symbolic Decision Transformer: environments, symbolic "
@@ -118,13 +225,46 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--repo-id", help="LeRobot repo id recorded in the dataset (default: local/ENV)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_collect)
+
+    p = sub.add_parser("train", help="train one learned method on one env, every seed (the `train` stage)")
+    p.add_argument("--env", required=True)
+    p.add_argument("--method", required=True, choices=["hnsdt", "pure_dt"])
+    p.add_argument("--dataset", help="LeRobot dataset folder (default: data/datasets/ENV)")
+    p.add_argument("--out", help="checkpoint folder (default: models/ENV/METHOD)")
+    p.add_argument("--curve", help="training-curve CSV (default: plots/train/ENV-METHOD.csv)")
+    p.set_defaults(func=cmd_train)
+
+    p = sub.add_parser("evaluate", help="evaluate every method x env x fail_prob x seed (the `evaluate` stage)")
+    p.add_argument("--models", default="models", help="checkpoint root (default: models)")
+    p.add_argument("--out", default="results", help="results folder (default: results)")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=cmd_evaluate)
+
+    p = sub.add_parser("report", help="figures and report.md from the evaluation (the `report` stage)")
+    p.add_argument("--results", default="results")
+    p.add_argument("--out", default="report")
+    p.set_defaults(func=cmd_report)
+
+    p = sub.add_parser("replay", help="find or render the recording of an episode (.rrd for rerun, .mcap for "
+                       "Foxglove)")
+    p.add_argument("episode_id", nargs="?", help="an evaluated episode id from results/episodes.csv, e.g. "
+                   "hnsdt/keydoor/fp0.1/seed0/ep0")
+    p.add_argument("--results", default="results")
+    p.add_argument("--dataset", help="instead, render an episode of this collected LeRobot dataset folder")
+    p.add_argument("--episode", type=int, default=0, help="with --dataset: the episode index")
+    p.add_argument("--out", help="with --dataset: the .rrd to write (an .mcap is written beside it)")
+    p.add_argument("--open", action="store_true", help="start the rerun viewer on the recording")
+    p.set_defaults(func=cmd_replay)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     if argv is None:
         ensure_deterministic_hashing()
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command == "replay" and not args.episode_id and args.dataset is None:
+        parser.error("replay needs an EPISODE_ID or --dataset")
     from hnsdt.config import ParamsError
     from hnsdt.envs import LayoutError
 

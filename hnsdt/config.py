@@ -12,6 +12,9 @@ from hnsdt.data.collect import POLICIES, STARTS, Behaviour, CollectConfig
 from hnsdt.envs import ENV_IDS, LayoutError, load_layout
 from hnsdt.symbolic.planner import PLAN_MODES
 
+LEARNED_METHODS = ("hnsdt", "pure_dt")
+EVAL_METHODS = ("hnsdt", "pure_dt", "symbolic")
+
 
 class ParamsError(ValueError):
     """A malformed params file; the message names the file and the key."""
@@ -122,3 +125,67 @@ def collect_config(params: dict, name: str) -> CollectConfig:
         fail_probs=fail_probs(params, "collect.fail_probs"), behaviours=behaviours,
         seed=_get(params, "collect.seed", int), fps=fps, executor=executor_config(params),
     )
+
+
+def _int_list(params: dict, key: str) -> list[int]:
+    values = _get(params, key, list)
+    if not values or not all(isinstance(v, int) and not isinstance(v, bool) for v in values):
+        raise _fail(params, f"{key} must be a non-empty list of integers, got {values!r}")
+    return values
+
+
+def _names(params: dict, key: str, allowed) -> list[str]:
+    values = _get(params, key, list)
+    bad = [v for v in values if v not in allowed]
+    if not values or bad:
+        raise _fail(params, f"{key}: unknown name(s) {bad!r}; expected some of {list(allowed)}")
+    return values
+
+
+def model_config(params: dict, env_name: str, condition: str):
+    from hnsdt.models.dt import DTConfig
+
+    env = env_settings(params, env_name)
+    sizes = {k: _get(params, f"models.{env_name}.{k}", int) for k in ("n_layers", "n_heads", "d_model", "context")}
+    if min(sizes.values()) < 1:
+        raise _fail(params, f"models.{env_name}: sizes must be positive, got {sizes}")
+    try:
+        return DTConfig(condition=condition, n_flags=env["layout"].n_flags, grid_h=env["layout"].shape[0],
+                        grid_w=env["layout"].shape[1], dropout=_get(params, "train.dropout", float, 0.1),
+                        max_timestep=env["max_steps"], **sizes)
+    except ValueError as e:
+        raise _fail(params, f"models.{env_name}: {e}") from None
+
+
+def train_settings(params: dict) -> dict:
+    from hnsdt.models.train import TrainConfig
+
+    envs = _get(params, "train.envs", list)
+    for e in envs:
+        env_settings(params, e)
+    out = {
+        "envs": envs, "methods": _names(params, "train.methods", LEARNED_METHODS),
+        "seeds": _int_list(params, "train.seeds"), "workers": _get(params, "train.workers", int, 1),
+        "config": TrainConfig(epochs=_get(params, "train.epochs", int), batch_size=_get(params, "train.batch_size", int),
+                              lr=_get(params, "train.lr", float), max_steps=_get(params, "train.max_steps", int, 0),
+                              device=_get(params, "train.device", str, "auto")),
+    }
+    cfg = out["config"]
+    if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.max_steps < 0 or out["workers"] < 1:
+        raise _fail(params, "train: epochs, batch_size, workers must be >= 1, lr > 0 and max_steps >= 0")
+    return out
+
+
+def evaluate_settings(params: dict) -> dict:
+    episodes = _get(params, "evaluate.episodes", int)
+    if episodes < 1:
+        raise _fail(params, f"evaluate.episodes must be >= 1, got {episodes}")
+    per_cell = _get(params, "logs.episodes_per_cell", int, 1)
+    if not 0 <= per_cell <= episodes:
+        raise _fail(params, f"logs.episodes_per_cell must be in 0..evaluate.episodes, got {per_cell}")
+    return {
+        "methods": _names(params, "evaluate.methods", EVAL_METHODS),
+        "envs": _get(params, "train.envs", list), "seeds": _int_list(params, "train.seeds"),
+        "fail_probs": fail_probs(params, "evaluate.fail_probs"), "episodes": episodes,
+        "device": _get(params, "evaluate.device", str, "cpu"), "log_episodes": per_cell,
+    }

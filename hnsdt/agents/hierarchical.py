@@ -20,7 +20,7 @@ class HierarchicalAgent:
     def reset(self, obs: np.ndarray) -> None:
         self.executors = [PlanExecutor(self.layout, self.config).start(o) for o in obs]
 
-    def observe(self, obs: np.ndarray, active: np.ndarray) -> None:
+    def observe(self, obs: np.ndarray, active: np.ndarray, actions=None, rewards=None) -> None:
         """Update the executors of the copies that were live for the step that produced ``obs``."""
         for i in np.flatnonzero(active):
             self.executors[i].observe(obs[i])

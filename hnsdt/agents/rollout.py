@@ -1,6 +1,7 @@
 """Run a batched agent for one episode in every copy of a :class:`KeyDoorVectorEnv` and keep the trajectories.
 
-An agent is anything with ``reset(obs)``, ``act(obs) -> actions``, ``observe(obs, active)`` and ``finish()``;
+An agent is anything with ``reset(obs)``, ``act(obs) -> actions``, ``observe(obs, active, actions, rewards)``
+(the copies live during the step, and what they did and got) and ``finish()``;
 ``subgoals()`` (ids and target cells) is recorded when the agent has it, and ``executors`` (one
 :class:`PlanExecutor` per copy) supply the plan, sub-goal segments and replans of each episode.
 """
@@ -51,7 +52,7 @@ class RandomAgent:
     def act(self, obs: np.ndarray) -> np.ndarray:
         return self.rng.integers(0, N_ACTIONS, size=len(obs))
 
-    def observe(self, obs: np.ndarray, active: np.ndarray) -> None:
+    def observe(self, obs: np.ndarray, active: np.ndarray, actions=None, rewards=None) -> None:
         pass
 
     def finish(self) -> None:
@@ -85,7 +86,7 @@ def rollout(env: KeyDoorVectorEnv, agent, seed: int, start_states: np.ndarray | 
         obs, r, _, _, _ = env.step(a)
         actions[t], rewards[t], states[t + 1] = a, r, obs
         lengths += active
-        agent.observe(obs, active)
+        agent.observe(obs, active, a, r)
         t += 1
     agent.finish()
     executors = getattr(agent, "executors", None)

@@ -1,0 +1,83 @@
+"""Context windows for the decision transformer, read from a LeRobot dataset.
+
+Frames are read once through stock ``LeRobotDataset`` (its Arrow table, as numpy) and windows are cut with
+numpy indexing: the same windows ``delta_timestamps`` gives, left-padded at episode starts, but built in
+milliseconds for a whole epoch instead of one ``__getitem__`` call per sample.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass
+class Frames:
+    states: np.ndarray  # (N, d) int64
+    actions: np.ndarray  # (N,) int64
+    rewards: np.ndarray  # (N,) float32
+    subgoals: np.ndarray  # (N,) int64
+    targets: np.ndarray  # (N, 2) int64
+    episode: np.ndarray  # (N,) int64
+    timestep: np.ndarray  # (N,) int64, frame index within its episode
+    episode_start: np.ndarray  # (N,) int64, global index of the episode's first frame
+    returns_to_go: np.ndarray  # (N,) float32, undiscounted sum of this and later rewards of the episode
+
+    def __len__(self) -> int:
+        return len(self.actions)
+
+
+def frames_from_arrays(states, actions, rewards, subgoals, targets, episode, timestep) -> Frames:
+    episode = np.asarray(episode, dtype=np.int64)
+    n = len(episode)
+    starts = np.flatnonzero(np.r_[True, episode[1:] != episode[:-1]])
+    lengths = np.diff(np.r_[starts, n])
+    episode_start = np.repeat(starts, lengths)
+    rewards = np.asarray(rewards, dtype=np.float32)
+    # Returns-to-go: reverse cumulative sum inside each episode.
+    rtg = np.zeros(n, dtype=np.float32)
+    for s, ln in zip(starts, lengths):
+        rtg[s : s + ln] = np.cumsum(rewards[s : s + ln][::-1])[::-1]
+    return Frames(np.asarray(states, np.int64), np.asarray(actions, np.int64).reshape(n), rewards,
+                  np.asarray(subgoals, np.int64).reshape(n), np.asarray(targets, np.int64).reshape(n, 2),
+                  episode, np.asarray(timestep, np.int64).reshape(n), episode_start, rtg)
+
+
+def load_frames(root: str | Path) -> Frames:
+    from hnsdt.data.lerobot_io import open_dataset
+
+    ds = open_dataset(root)
+    cols = ds.hf_dataset.with_format("numpy")[:]
+    return frames_from_arrays(np.stack(cols["observation.state"]), np.ravel(cols["action"]),
+                              np.ravel(cols["next.reward"]), np.ravel(cols["subgoal"]),
+                              np.stack(cols["subgoal.target"]), cols["episode_index"], cols["frame_index"])
+
+
+def window_ends(frames: Frames, condition: str) -> np.ndarray:
+    """Frames that end a training window: every frame with a sub-goal (HNSDT), or every frame (pure DT)."""
+    if condition == "subgoal":
+        return np.flatnonzero(frames.subgoals != 0)
+    return np.arange(len(frames))
+
+
+def make_windows(frames: Frames, ends: np.ndarray, h: int, condition: str) -> dict[str, np.ndarray]:
+    """Windows of ``h`` steps ending at ``ends``, with the arrays the model's forward and loss read."""
+    offsets = np.arange(h - 1, -1, -1)
+    idx = ends[:, None] - offsets[None, :]
+    pad = idx < frames.episode_start[ends][:, None]
+    idx = np.where(pad, ends[:, None], idx)  # padded slots read any real frame; the model replaces them
+    batch = {
+        "states": frames.states[idx], "actions": frames.actions[idx], "timesteps": frames.timestep[idx],
+        "pad": pad,
+    }
+    if condition == "subgoal":
+        g = frames.subgoals[ends]
+        batch["subgoal_ids"] = g
+        batch["subgoal_targets"] = frames.targets[ends]
+        batch["loss_mask"] = (frames.subgoals[idx] == g[:, None]) & ~pad
+    else:
+        batch["returns"] = frames.returns_to_go[idx]
+        batch["loss_mask"] = ~pad
+    return batch

@@ -1,0 +1,156 @@
+"""Evaluation: every method × env × fail_prob × seed, N episodes each, batched over environment copies.
+
+Metrics follow the paper: success rate, mean steps of the successful episodes, mean reward (episode return);
+each is computed per seed and then reported as mean ± std over seeds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from hnsdt.agents.executor import ExecutorConfig
+from hnsdt.agents.rollout import Episode, rollout
+from hnsdt.agents.symbolic import SymbolicAgent
+from hnsdt.envs.layout import Layout
+from hnsdt.envs.vector import KeyDoorVectorEnv
+
+METHODS = ("hnsdt", "pure_dt", "symbolic")
+LEARNED = {"hnsdt": "subgoal", "pure_dt": "return"}  # method -> DT conditioning
+
+
+@dataclass
+class Cell:
+    method: str
+    env: str
+    fail_prob: float
+    seed: int
+
+    @property
+    def key(self) -> str:
+        return f"{self.method}/{self.env}/fp{self.fail_prob:g}/seed{self.seed}"
+
+    def episode_id(self, i: int) -> str:
+        return f"{self.key}/ep{i}"
+
+
+def checkpoint_dir(models_root: str | Path, env: str, method: str, seed: int) -> Path:
+    return Path(models_root) / env / method / f"seed{seed}"
+
+
+def make_agent(method: str, layout: Layout, executor: ExecutorConfig, models_root: str | Path, env: str,
+               seed: int, device: str = "cpu"):
+    if method == "symbolic":
+        return SymbolicAgent(layout, executor)
+    if method not in LEARNED:
+        raise ValueError(f"unknown method {method!r}; expected one of {METHODS}")
+    from hnsdt.agents.dt_agents import HNSDTAgent, PureDTAgent
+    from hnsdt.models.train import load_checkpoint
+
+    model, meta = load_checkpoint(checkpoint_dir(models_root, env, method, seed), device)
+    if method == "hnsdt":
+        return HNSDTAgent(layout, model, executor)
+    return PureDTAgent(model, meta["target_return"])
+
+
+def cell_seed(cell: Cell, fail_index: int) -> int:
+    """The environment seed of a cell: independent of the method, so methods face the same draws."""
+    return int(np.random.SeedSequence([cell.seed, fail_index, 104729]).generate_state(1)[0])
+
+
+def run_cell(cell: Cell, fail_index: int, layout: Layout, max_steps: int, episodes: int, agent) -> list[Episode]:
+    env = KeyDoorVectorEnv(episodes, layout, cell.fail_prob, max_steps)
+    return rollout(env, agent, seed=cell_seed(cell, fail_index))
+
+
+def episode_rows(cell: Cell, episodes: list[Episode]) -> list[dict]:
+    return [{
+        "method": cell.method, "env": cell.env, "fail_prob": cell.fail_prob, "seed": cell.seed, "episode": i,
+        "episode_id": cell.episode_id(i), "success": bool(ep.success), "steps": ep.length,
+        "reward": round(ep.ret, 6), "replans": ep.replans,
+    } for i, ep in enumerate(episodes)]
+
+
+def per_seed_metrics(table: pd.DataFrame) -> pd.DataFrame:
+    """success rate, mean steps on success (NaN when none succeeded), mean reward: one row per cell."""
+    g = table.groupby(["method", "env", "fail_prob", "seed"])
+    out = g.agg(success=("success", "mean"), reward=("reward", "mean"), episodes=("success", "size"))
+    out["steps"] = table[table.success].groupby(["method", "env", "fail_prob", "seed"])["steps"].mean()
+    return out.reset_index()
+
+
+def summary(table: pd.DataFrame) -> pd.DataFrame:
+    """Mean ± std over seeds of the per-seed metrics: one row per method × env × fail_prob."""
+    per_seed = per_seed_metrics(table)
+    g = per_seed.groupby(["method", "env", "fail_prob"])
+    out = g.agg(success_mean=("success", "mean"), success_std=("success", "std"),
+                steps_mean=("steps", "mean"), steps_std=("steps", "std"),
+                reward_mean=("reward", "mean"), reward_std=("reward", "std"), seeds=("seed", "nunique"))
+    return out.fillna({"success_std": 0.0, "steps_std": 0.0, "reward_std": 0.0}).reset_index()
+
+
+def metrics_json(summ: pd.DataFrame) -> dict:
+    """Nested {env: {method: {fail_prob: {metric: value}}}} for `dvc metrics show`."""
+    out: dict = {}
+    for row in summ.itertuples():
+        cell = out.setdefault(row.env, {}).setdefault(row.method, {})
+        cell[f"fail_{row.fail_prob:g}"] = {
+            k: (None if pd.isna(getattr(row, k)) else round(float(getattr(row, k)), 4))
+            for k in ("success_mean", "success_std", "steps_mean", "steps_std", "reward_mean", "reward_std")
+        }
+    return out
+
+
+def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig, models_root: str | Path,
+                 out_dir: str | Path, progress: bool = True) -> pd.DataFrame:
+    """Run every cell, write ``episodes.csv``, ``summary.csv``, ``metrics.json`` and the episode recordings
+    under ``out_dir`` (built in a temporary folder, moved into place when complete)."""
+    import json
+    import os
+    import shutil
+    import tempfile
+
+    from tqdm import tqdm
+
+    from hnsdt.logs import record_from_episode, write_mcap, write_rrd
+
+    out = Path(out_dir)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        rows = []
+        cells = [(m, e, fi, f, s) for m in settings["methods"] for e in settings["envs"]
+                 for fi, f in enumerate(settings["fail_probs"]) for s in settings["seeds"]]
+        for method, env, fi, fail_prob, seed in tqdm(cells, desc="evaluate", unit="cell", disable=not progress):
+            cell = Cell(method, env, fail_prob, seed)
+            lay, max_steps = envs[env]["layout"], envs[env]["max_steps"]
+            agent = make_agent(method, lay, executor, models_root, env, seed, settings["device"])
+            episodes = run_cell(cell, fi, lay, max_steps, settings["episodes"], agent)
+            cell_rows = episode_rows(cell, episodes)
+            if seed == settings["seeds"][0]:
+                for i in range(settings["log_episodes"]):
+                    rel = Path("logs") / method / env / f"fp{fail_prob:g}" / f"seed{seed}" / f"ep{i}"
+                    rec = record_from_episode(cell.episode_id(i), lay, episodes[i], {"method": method})
+                    write_rrd(tmp / rel.with_suffix(".rrd"), rec, episode_index=i)
+                    write_mcap(tmp / rel.with_suffix(".mcap"), rec)
+                    cell_rows[i]["rrd"] = str(Path(out.name) / rel.with_suffix(".rrd"))
+                    cell_rows[i]["mcap"] = str(Path(out.name) / rel.with_suffix(".mcap"))
+            rows += cell_rows
+        table = pd.DataFrame(rows)
+        for col in ("rrd", "mcap"):
+            if col not in table:
+                table[col] = ""
+        table[["rrd", "mcap"]] = table[["rrd", "mcap"]].fillna("")
+        table.to_csv(tmp / "episodes.csv", index=False)
+        summ = summary(table)
+        summ.to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
+        (tmp / "metrics.json").write_text(json.dumps(metrics_json(summ), indent=2, sort_keys=True) + "\n")
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(tmp, out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return table

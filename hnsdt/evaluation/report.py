@@ -1,0 +1,162 @@
+"""The report stage: matplotlib figures and a ``report.md`` that traces every figure to its inputs.
+
+Each figure is listed with the git revision, a digest of the params and the md5 of every dataset and model it
+came from, as recorded in ``dvc.lock`` by the stages that produced them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+import yaml  # noqa: E402
+
+METHOD_LABELS = {"hnsdt": "HNSDT (ours)", "pure_dt": "Pure DT", "symbolic": "BFS + controllers"}
+METRICS = [("success", "success rate"), ("steps", "steps (successful episodes)"), ("reward", "average reward")]
+
+
+def git_revision(cwd: str | Path = ".") -> str:
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=cwd, capture_output=True, text=True,
+                             check=True).stdout.strip()
+    except (subprocess.CalledProcessError, FileNotFoundError):
+        return "unknown (not a git checkout with commits)"
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd, capture_output=True,
+                           text=True).stdout.strip()
+    return rev + ("-dirty" if dirty else "")
+
+
+def params_digest(params: dict) -> str:
+    clean = {k: v for k, v in params.items() if not k.startswith("_")}
+    return hashlib.sha256(json.dumps(clean, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def lock_outputs(lock_path: str | Path = "dvc.lock") -> dict[str, str]:
+    """{output path: md5} for every stage output recorded in dvc.lock (datasets, models)."""
+    path = Path(lock_path)
+    if not path.is_file():
+        return {}
+    lock = yaml.safe_load(path.read_text()) or {}
+    outs = {}
+    for stage in (lock.get("stages") or {}).values():
+        for out in stage.get("outs", []) or []:
+            outs[out["path"]] = out.get("md5", "?")
+    return outs
+
+
+def _label(method: str) -> str:
+    return METHOD_LABELS.get(method, method)
+
+
+def comparison_figure(summ: pd.DataFrame, path: Path) -> None:
+    envs = list(dict.fromkeys(summ.env))
+    fig, axes = plt.subplots(len(METRICS), len(envs), figsize=(5 * len(envs), 9), squeeze=False)
+    for j, env in enumerate(envs):
+        for i, (metric, title) in enumerate(METRICS):
+            ax = axes[i, j]
+            for method in dict.fromkeys(summ.method):
+                d = summ[(summ.env == env) & (summ.method == method)].sort_values("fail_prob")
+                ax.errorbar(d.fail_prob, d[f"{metric}_mean"], yerr=d[f"{metric}_std"], marker="o", capsize=3,
+                            label=_label(method))
+            ax.set_title(f"{env}: {title}")
+            ax.set_xlabel("action failure probability")
+            ax.grid(alpha=0.3)
+            if metric == "success":
+                ax.set_ylim(-0.05, 1.05)
+    axes[0, 0].legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def heatmap_figure(summ: pd.DataFrame, path: Path) -> None:
+    methods = list(dict.fromkeys(summ.method))
+    cols = sorted({(e, f) for e, f in zip(summ.env, summ.fail_prob)}, key=lambda ef: (list(summ.env).index(ef[0]),
+                                                                                       ef[1]))
+    grid = np.full((len(methods), len(cols)), np.nan)
+    for r in summ.itertuples():
+        grid[methods.index(r.method), cols.index((r.env, r.fail_prob))] = r.success_mean
+    fig, ax = plt.subplots(figsize=(1.2 * len(cols) + 2, 0.7 * len(methods) + 1.5))
+    im = ax.imshow(grid, cmap="RdYlGn", vmin=0, vmax=1, aspect="auto")
+    ax.set_xticks(range(len(cols)), [f"{e}\n{f:g}" for e, f in cols])
+    ax.set_yticks(range(len(methods)), [_label(m) for m in methods])
+    for (i, j), v in np.ndenumerate(grid):
+        if not np.isnan(v):
+            ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=9)
+    ax.set_title("success rate by method x (environment, failure probability)")
+    fig.colorbar(im, ax=ax, fraction=0.03)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _table(summ: pd.DataFrame) -> str:
+    lines = ["| env | method | fail_prob | success | steps (success) | reward |", "|---|---|---|---|---|---|"]
+    for r in summ.itertuples():
+        steps = "–" if pd.isna(r.steps_mean) else f"{r.steps_mean:.1f} ± {r.steps_std:.1f}"
+        lines.append(f"| {r.env} | {_label(r.method)} | {r.fail_prob:g} | {r.success_mean:.3f} ± "
+                     f"{r.success_std:.3f} | {steps} | {r.reward_mean:.3f} ± {r.reward_std:.3f} |")
+    return "\n".join(lines)
+
+
+def write_report(params: dict, results: Path, out: Path, lock_path: str | Path = "dvc.lock") -> Path:
+    summary_path = results / "summary.csv"
+    if not summary_path.is_file():
+        raise FileNotFoundError(f"{summary_path}: no evaluation summary (run `dvc repro evaluate`)")
+    summ = pd.read_csv(summary_path)
+    episodes = pd.read_csv(results / "episodes.csv", keep_default_na=False)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        (tmp / "figures").mkdir()
+        comparison_figure(summ, tmp / "figures" / "comparison.png")
+        heatmap_figure(summ, tmp / "figures" / "success_heatmap.png")
+        outs = lock_outputs(lock_path)
+        inputs = {p: md5 for p, md5 in sorted(outs.items()) if p.startswith(("data/", "models/"))}
+        envs, methods = sorted(set(summ.env)), sorted(set(summ.method))
+        rev, digest = git_revision(), params_digest(params)
+        provenance = [f"- git revision: `{rev}`", f"- params digest (sha256 of params.yaml, 16 hex): `{digest}`",
+                      "- inputs (md5 from dvc.lock):"]
+        provenance += [f"  - `{p}`: `{md5}`" for p, md5 in inputs.items()] or ["  - (dvc.lock has none yet)"]
+        recorded = episodes[episodes.rrd != ""]
+        text = [
+            "# hnsdt report", "",
+            f"Evaluation of {', '.join(_label(m) for m in methods)} on {', '.join(envs)}: "
+            f"{int(summ.seeds.max())} training seed(s), fail_prob {', '.join(f'{f:g}' for f in sorted(set(summ.fail_prob)))}, "
+            f"{int(episodes.groupby(['method', 'env', 'fail_prob', 'seed']).size().max())} episodes per cell. "
+            "Metrics are computed per seed, then mean ± std over seeds.", "",
+            "## Provenance (applies to every figure below)", "", *provenance, "",
+            "## Comprehensive comparison", "",
+            "![comparison](figures/comparison.png)", "",
+            "Success rate, steps of successful episodes and average reward per method across failure "
+            "probabilities (the paper's comprehensive comparison). Made from `results/summary.csv`.", "",
+            "## Robustness heatmap", "",
+            "![heatmap](figures/success_heatmap.png)", "",
+            "Success rate for every method × (environment, failure probability) (the paper's robustness "
+            "figure). Made from `results/summary.csv`.", "",
+            "## Numbers", "", _table(summ), "",
+            "## Replaying episodes", "",
+            f"{len(recorded)} evaluated episodes have recordings; `hnsdt replay EPISODE_ID` prints their "
+            "`.rrd` (rerun) and `.mcap` (Foxglove) paths, e.g. "
+            + (f"`hnsdt replay {recorded.episode_id.iloc[0]}`." if len(recorded) else "(none recorded)."), "",
+        ]
+        (tmp / "report.md").write_text("\n".join(text))
+        (tmp / "provenance.json").write_text(json.dumps(
+            {"git_revision": rev, "params_digest": digest, "inputs": inputs}, indent=2, sort_keys=True) + "\n")
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(tmp, out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out / "report.md"

@@ -1,0 +1,130 @@
+"""The decision transformer of Appendix C: a decoder-only causal transformer over (state, action) tokens.
+
+Two conditionings share one network:
+
+* ``condition="subgoal"`` (HNSDT): the window is ``[g, s_1, a_1, ..., s_h]`` where ``g = ψ(o)`` is one sub-goal
+  token (operator id + target cell, its own embeddings). Every state token predicts its action; the loss only
+  counts steps whose own sub-goal is ``g`` (a window that starts in an earlier operator's segment still gives
+  its history as context).
+* ``condition="return"`` (the pure DT baseline, as in the original decision transformer): the window is
+  ``[R_1, s_1, a_1, ..., R_h, s_h]`` with the return-to-go ``R_k`` as its own token; no sub-goals.
+
+States are integer vectors (row, col, flags): row and column have embedding tables, flags a linear map. Every
+token of step k also gets the embedding of its episode timestep. The action head is a categorical over the 5
+actions; training minimises its negative log-likelihood.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+from hnsdt.symbolic.subgoals import VOCAB_SIZE
+
+N_ACTIONS = 5
+CONDITIONS = ("subgoal", "return")
+
+
+@dataclass
+class DTConfig:
+    condition: str  # "subgoal" (HNSDT) or "return" (pure DT)
+    n_flags: int
+    grid_h: int
+    grid_w: int
+    context: int = 10  # h: steps of (state, action) history in a window
+    n_layers: int = 3
+    n_heads: int = 4
+    d_model: int = 128
+    dropout: float = 0.1
+    max_timestep: int = 256
+    return_scale: float = 10.0  # returns-to-go are divided by this before embedding
+
+    def __post_init__(self):
+        if self.condition not in CONDITIONS:
+            raise ValueError(f"condition must be one of {CONDITIONS}, got {self.condition!r}")
+        if self.d_model % self.n_heads:
+            raise ValueError(f"d_model {self.d_model} is not divisible by n_heads {self.n_heads}")
+
+    @property
+    def tokens_per_step(self) -> int:
+        return 2 if self.condition == "subgoal" else 3
+
+    @property
+    def seq_len(self) -> int:
+        """Tokens in a window, without the final action (which is what is predicted)."""
+        extra = 1 if self.condition == "subgoal" else 0
+        return extra + self.tokens_per_step * self.context - 1
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class DecisionTransformer(nn.Module):
+    def __init__(self, cfg: DTConfig):
+        super().__init__()
+        self.cfg = cfg
+        d = cfg.d_model
+        self.row_emb = nn.Embedding(cfg.grid_h, d)
+        self.col_emb = nn.Embedding(cfg.grid_w, d)
+        self.flag_proj = nn.Linear(max(cfg.n_flags, 1), d, bias=False)
+        self.action_emb = nn.Embedding(N_ACTIONS, d)
+        self.time_emb = nn.Embedding(cfg.max_timestep + 1, d)
+        if cfg.condition == "subgoal":
+            self.subgoal_emb = nn.Embedding(VOCAB_SIZE, d)
+            self.target_row_emb = nn.Embedding(cfg.grid_h + 1, d)  # index 0 = no target
+            self.target_col_emb = nn.Embedding(cfg.grid_w + 1, d)
+        else:
+            self.return_proj = nn.Linear(1, d)
+        self.type_emb = nn.Embedding(3, d)  # state, action, condition: the model tells token kinds apart
+        self.pad_emb = nn.Parameter(torch.zeros(d))
+        layer = nn.TransformerEncoderLayer(d, cfg.n_heads, 4 * d, cfg.dropout, activation="gelu",
+                                           batch_first=True, norm_first=True)
+        self.blocks = nn.TransformerEncoder(layer, cfg.n_layers, enable_nested_tensor=False)
+        self.norm = nn.LayerNorm(d)
+        self.head = nn.Linear(d, N_ACTIONS)
+        self.drop = nn.Dropout(cfg.dropout)
+        self.register_buffer("causal_mask", nn.Transformer.generate_square_subsequent_mask(cfg.seq_len),
+                             persistent=False)
+
+    def embed_states(self, states: torch.Tensor) -> torch.Tensor:
+        flags = states[..., 2:].float() if self.cfg.n_flags else states[..., :1].float() * 0
+        return self.row_emb(states[..., 0]) + self.col_emb(states[..., 1]) + self.flag_proj(flags)
+
+    def forward(self, states, actions, timesteps, pad, subgoal_ids=None, subgoal_targets=None, returns=None):
+        """Action logits (B, h, 5), one per state of the window.
+
+        states (B, h, d) int64; actions (B, h) int64 (the last one is never read); timesteps (B, h) int64;
+        pad (B, h) bool marks steps before the episode began (windows are left-padded); subgoal_ids (B,) and
+        subgoal_targets (B, 2) for ``subgoal``; returns (B, h) float for ``return``. Padded steps become a
+        learned pad token, identically in training and at inference, so no attention mask is needed."""
+        cfg = self.cfg
+        B, h = actions.shape
+        time = self.time_emb(timesteps.clamp(0, cfg.max_timestep))
+        keep = (~pad)[..., None].float()
+        s_tok = (self.embed_states(states) + time + self.type_emb.weight[0]) * keep + self.pad_emb * (1 - keep)
+        a_tok = (self.action_emb(actions) + time + self.type_emb.weight[1]) * keep + self.pad_emb * (1 - keep)
+        if cfg.condition == "subgoal":
+            tgt = subgoal_targets + 1  # -1 (none) -> 0
+            g = (self.subgoal_emb(subgoal_ids) + self.target_row_emb(tgt[:, 0]) + self.target_col_emb(tgt[:, 1])
+                 + self.type_emb.weight[2])
+            steps = torch.stack([s_tok, a_tok], dim=2).reshape(B, 2 * h, -1)
+            seq = torch.cat([g[:, None], steps[:, :-1]], dim=1)  # drop the last action: it is the target
+            state_pos = 1 + 2 * torch.arange(h, device=seq.device)
+        else:
+            r_tok = self.return_proj(returns[..., None] / cfg.return_scale) + time + self.type_emb.weight[2]
+            r_tok = r_tok * keep + self.pad_emb * (1 - keep)
+            steps = torch.stack([r_tok, s_tok, a_tok], dim=2).reshape(B, 3 * h, -1)
+            seq = steps[:, :-1]
+            state_pos = 1 + 3 * torch.arange(h, device=seq.device)
+        x = self.blocks(self.drop(seq), mask=self.causal_mask, is_causal=True)
+        return self.head(self.norm(x[:, state_pos]))
+
+    def loss(self, batch: dict) -> torch.Tensor:
+        logits = self(batch["states"], batch["actions"], batch["timesteps"], batch["pad"], batch.get("subgoal_ids"),
+                      batch.get("subgoal_targets"), batch.get("returns"))
+        nll = F.cross_entropy(logits.reshape(-1, N_ACTIONS), batch["actions"].reshape(-1), reduction="none")
+        mask = batch["loss_mask"].reshape(-1).float()
+        return (nll * mask).sum() / mask.sum().clamp(min=1.0)

@@ -1,0 +1,155 @@
+"""Offline training of a decision transformer on a LeRobot dataset, and its checkpoints.
+
+Adam, batch of windows, a fixed number of epochs over the training windows; CUDA when available, CPU
+otherwise. Same seed on CPU ⇒ same weights. A checkpoint is a folder with ``model.safetensors`` (weights) and
+``config.json`` (the :class:`DTConfig` and training facts).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from safetensors.torch import load_file, save_file
+from tqdm import tqdm
+
+from hnsdt.data.windows import Frames, make_windows, window_ends
+from hnsdt.models.dt import DecisionTransformer, DTConfig
+
+
+@dataclass
+class TrainConfig:
+    epochs: int = 20
+    max_steps: int = 0  # stop after this many gradient steps (0 = run all epochs)
+    batch_size: int = 128
+    lr: float = 1e-3
+    seed: int = 0
+    device: str = "auto"  # "auto" = cuda if available, else cpu
+    threads: int = 0  # torch CPU threads; 0 = torch's default
+    log_every: int = 10  # one training-curve row per this many steps
+
+
+def pick_device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    return torch.device(name)
+
+
+def _to_tensors(batch: dict, device: torch.device) -> dict:
+    out = {}
+    for k, v in batch.items():
+        t = torch.from_numpy(np.ascontiguousarray(v))
+        out[k] = t.to(device, non_blocking=True)
+    return out
+
+
+def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bool = True,
+             desc: str = "train") -> tuple[DecisionTransformer, list[dict]]:
+    """Train from scratch; returns the model (in eval mode) and the curve (mean loss every ``log_every``)."""
+    if cfg.threads:
+        torch.set_num_threads(cfg.threads)
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    device = pick_device(cfg.device)
+    model = DecisionTransformer(model_cfg).to(device)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    ends = window_ends(frames, model_cfg.condition)
+    if len(ends) == 0:
+        raise ValueError("no training windows: the dataset has no frames with a sub-goal")
+    steps_per_epoch = int(np.ceil(len(ends) / cfg.batch_size))
+    total_steps = cfg.epochs * steps_per_epoch
+    if cfg.max_steps:
+        total_steps = min(total_steps, cfg.max_steps)
+    curve = []
+    bar = tqdm(total=total_steps, desc=desc, disable=not progress, unit="step")
+    model.train()
+    step, seen, recent = 0, 0, []
+    for epoch in range(cfg.epochs):
+        if step >= total_steps:
+            break
+        order = rng.permutation(ends)
+        for b in range(steps_per_epoch):
+            if step >= total_steps:
+                break
+            rows = order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
+            batch = make_windows(frames, rows, model_cfg.context, model_cfg.condition)
+            loss = model.loss(_to_tensors(batch, device))
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            step += 1
+            seen += len(rows)
+            recent.append(loss.item())
+            bar.update(1)
+            bar.set_postfix(epoch=epoch + 1, loss=f"{recent[-1]:.4f}")
+            if step % cfg.log_every == 0 or step == total_steps:
+                curve.append({"step": step, "epoch": epoch + 1, "windows_seen": seen,
+                              "loss": float(np.mean(recent))})
+                recent = []
+    bar.close()
+    model.eval()
+    return model, curve
+
+
+def save_checkpoint(model: DecisionTransformer, out_dir: str | Path, extra: dict | None = None) -> Path:
+    """Write ``model.safetensors`` and ``config.json`` into ``out_dir`` atomically (temp folder, rename)."""
+    out = Path(out_dir)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
+        save_file(state, str(tmp / "model.safetensors"))
+        meta = {"model": model.cfg.to_dict(), **(extra or {})}
+        (tmp / "config.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(tmp, out)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return out
+
+
+def load_checkpoint(path: str | Path, device: str = "cpu") -> tuple[DecisionTransformer, dict]:
+    path = Path(path)
+    for name in ("model.safetensors", "config.json"):
+        if not (path / name).is_file():
+            raise FileNotFoundError(f"checkpoint {path}: missing {name} (run `dvc repro train`)")
+    meta = json.loads((path / "config.json").read_text())
+    model = DecisionTransformer(DTConfig(**meta["model"]))
+    model.load_state_dict(load_file(str(path / "model.safetensors"), device=device))
+    model.to(device).eval()
+    return model, meta
+
+
+def train_config_dict(cfg: TrainConfig) -> dict:
+    return asdict(cfg)
+
+
+def _train_one(args) -> tuple[int, list[dict]]:
+    frames, model_cfg, cfg, out_dir, extra, position = args
+    torch.set_num_threads(cfg.threads or 1)
+    model, curve = train_dt(frames, model_cfg, cfg, progress=True, desc=f"seed {cfg.seed}")
+    save_checkpoint(model, out_dir, {**extra, "train": asdict(cfg), "curve": curve})
+    return cfg.seed, curve
+
+
+def train_seeds(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, seeds: list[int], out_root: str | Path,
+                workers: int = 1, extra: dict | None = None) -> dict[int, list[dict]]:
+    """Train one model per seed into ``out_root/seed{k}``; with ``workers > 1`` seeds run in parallel
+    processes of one torch thread each (two 1-thread processes beat one 2-thread process on 2 cores)."""
+    import concurrent.futures as cf
+    import multiprocessing as mp
+    from dataclasses import replace
+
+    jobs = [(frames, model_cfg, replace(cfg, seed=s, threads=cfg.threads or (1 if workers > 1 else 0)),
+             Path(out_root) / f"seed{s}", dict(extra or {}), i) for i, s in enumerate(seeds)]
+    if workers <= 1:
+        return dict(_train_one(j) for j in jobs)
+    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+        return dict(pool.map(_train_one, jobs))
