@@ -90,8 +90,7 @@ def cmd_collect(args) -> None:
 
 
 def cmd_train(args) -> None:
-    import shutil
-    import tempfile
+    from dataclasses import replace
 
     import numpy as np
     import pandas as pd
@@ -99,6 +98,7 @@ def cmd_train(args) -> None:
     from hnsdt.config import load_params, model_config, train_settings
     from hnsdt.data.windows import load_frames
     from hnsdt.evaluation.evaluate import LEARNED
+    from hnsdt.fileio import atomic_dir
     from hnsdt.models.train import train_seeds
 
     params = load_params(args.params)
@@ -114,15 +114,9 @@ def cmd_train(args) -> None:
     extra = {"env": args.env, "method": args.method, "dataset": str(dataset),
              "target_return": float(frames.returns_to_go[starts].max())}  # pure DT: the best return in the data
     out = Path(args.out or f"models/{args.env}/{args.method}")
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
-        curves = train_seeds(frames, model_cfg, ts["config"], ts["seeds"], tmp, ts["workers"], extra)
-        if out.exists():
-            shutil.rmtree(out)
-        tmp.replace(out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+    cfg = replace(ts["config"], behaviours=ts["behaviours"][args.method])
+    with atomic_dir(out) as tmp:
+        curves = train_seeds(frames, model_cfg, cfg, ts["seeds"], tmp, ts["workers"], extra)
     rows = [dict(row, seed=seed) for seed, curve in sorted(curves.items()) for row in curve]
     plot = Path(args.curve or f"plots/train/{args.env}-{args.method}.csv")
     plot.parent.mkdir(parents=True, exist_ok=True)

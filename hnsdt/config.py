@@ -170,6 +170,12 @@ def train_settings(params: dict) -> dict:
                               lr=_get(params, "train.lr", float), max_steps=_get(params, "train.max_steps", int, 0),
                               device=_get(params, "train.device", str, "auto")),
     }
+    behaviours = _get(params, "train.behaviours", dict, {})
+    for method, names in behaviours.items():
+        if method not in LEARNED_METHODS or not isinstance(names, list) or not set(names) <= set(POLICIES):
+            raise _fail(params, f"train.behaviours.{method} must be a list drawn from {POLICIES}, for a method "
+                        f"in {LEARNED_METHODS}; got {names!r}")
+    out["behaviours"] = {m: tuple(behaviours.get(m, [])) for m in LEARNED_METHODS}
     cfg = out["config"]
     if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.max_steps < 0 or out["workers"] < 1:
         raise _fail(params, "train: epochs, batch_size, workers must be >= 1, lr > 0 and max_steps >= 0")

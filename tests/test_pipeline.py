@@ -1,11 +1,13 @@
 """The real DVC pipeline, end to end, on a tiny params override in a temporary copy of the repo."""
 
+import json
 import os
 import shutil
 import subprocess
 import sys
 from pathlib import Path
 
+import pandas as pd
 import pytest
 import yaml
 
@@ -30,6 +32,8 @@ def _tiny_params(path: Path) -> None:
     params["collect"]["fail_probs"] = [0.1]
     for b in params["collect"]["behaviours"]:
         b["episodes"] = 3
+    params["train"].update(seeds=[0], workers=1, epochs=1, max_steps=3)
+    params["evaluate"].update(episodes=4, fail_probs=[0.0, 0.2])
     path.write_text(yaml.safe_dump(params, sort_keys=False))
 
 
@@ -40,6 +44,19 @@ def _run(args, cwd):
     return out.stdout + out.stderr
 
 
+def _ran(log: str) -> set[str]:
+    return {line.split("'")[1] for line in log.splitlines() if line.startswith("Running stage '")}
+
+
+def _set(repo: Path, section: str, key: str, value) -> None:
+    params = yaml.safe_load((repo / "params.yaml").read_text())
+    node = params
+    for part in section.split("."):
+        node = node[part]
+    node[key] = value
+    (repo / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
+
+
 @pytest.fixture(scope="module")
 def repo_copy(tmp_path_factory):
     dst = tmp_path_factory.mktemp("pipeline") / "repo"
@@ -47,22 +64,50 @@ def repo_copy(tmp_path_factory):
     _copy_repo(dst)
     _tiny_params(dst / "params.yaml")
     _run(["git", "init", "-q"], dst)
+    _run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "add", "-A"], dst)
+    _run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "copy"], dst)
     return dst
 
 
-def test_repro_builds_every_dataset_then_reruns_only_what_changed(repo_copy):
+def test_repro_runs_everything_then_nothing_then_only_what_changed(repo_copy):
     from hnsdt.data.lerobot_io import open_dataset
 
-    log = _run(["dvc", "repro"], repo_copy)
-    assert "Running stage 'collect@keydoor'" in log and "Running stage 'collect@multikeydoor'" in log
+    ran = _ran(_run(["dvc", "repro"], repo_copy))
+    assert ran == {"collect@keydoor", "collect@multikeydoor", "train@keydoor-hnsdt", "train@keydoor-pure_dt",
+                   "train@multikeydoor-hnsdt", "train@multikeydoor-pure_dt", "evaluate", "report"}
     for env in ("keydoor", "multikeydoor"):
-        ds = open_dataset(repo_copy / "data/datasets" / env)
-        assert ds.meta.total_episodes == 9
-    assert "Running stage" not in _run(["dvc", "repro"], repo_copy)  # nothing changed: nothing reruns
+        assert open_dataset(repo_copy / "data/datasets" / env).meta.total_episodes == 9
+        for method in ("hnsdt", "pure_dt"):
+            assert (repo_copy / f"models/{env}/{method}/seed0/model.safetensors").is_file()
+            assert (repo_copy / f"plots/train/{env}-{method}.csv").is_file()
+    table = pd.read_csv(repo_copy / "results/episodes.csv", keep_default_na=False)
+    assert len(table) == 3 * 2 * 2 * 1 * 4  # methods x envs x fail_probs x seeds x episodes
+    metrics = json.loads((repo_copy / "results/metrics.json").read_text())
+    assert metrics["keydoor"]["symbolic"]["fail_0"]["success_mean"] == 1.0
+    recorded = table[table.rrd != ""]
+    assert len(recorded) == 3 * 2 * 2 and all((repo_copy / p).is_file() for p in recorded.mcap)
+    report = (repo_copy / "report/report.md").read_text()
+    lock = yaml.safe_load((repo_copy / "dvc.lock").read_text())
+    dataset_md5 = lock["stages"]["collect@keydoor"]["outs"][0]["md5"]
+    rev = _run(["git", "rev-parse", "--short=12", "HEAD"], repo_copy).strip()
+    assert dataset_md5 in report and "figures/comparison.png" in report and f"`{rev}" in report
+    assert (repo_copy / "report/figures/success_heatmap.png").stat().st_size > 10_000
 
-    params = yaml.safe_load((repo_copy / "params.yaml").read_text())
-    params["envs"]["keydoor"]["max_steps"] = 50
-    (repo_copy / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
-    log = _run(["dvc", "repro"], repo_copy)
-    assert "Running stage 'collect@keydoor'" in log and "collect@multikeydoor" not in log.replace(
-        "Stage 'collect@multikeydoor' didn't change", "")
+    assert _ran(_run(["dvc", "repro"], repo_copy)) == set()  # nothing changed: nothing reruns
+
+    _set(repo_copy, "evaluate", "episodes", 5)
+    assert _ran(_run(["dvc", "repro"], repo_copy)) == {"evaluate", "report"}
+
+    _set(repo_copy, "envs.keydoor", "max_steps", 60)
+    assert _ran(_run(["dvc", "repro"], repo_copy)) == {
+        "collect@keydoor", "train@keydoor-hnsdt", "train@keydoor-pure_dt", "evaluate", "report"}
+
+
+def test_replay_points_to_an_evaluated_episode(repo_copy):
+    out = subprocess.run([sys.executable, "-m", "hnsdt.cli", "replay", "hnsdt/keydoor/fp0.2/seed0/ep0"],
+                         cwd=repo_copy, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert "results/logs/hnsdt/keydoor/fp0.2/seed0/ep0.rrd" in out.stdout and ".mcap" in out.stdout
+    missing = subprocess.run([sys.executable, "-m", "hnsdt.cli", "replay", "hnsdt/keydoor/fp0.2/seed0/ep3"],
+                             cwd=repo_copy, capture_output=True, text=True)
+    assert missing.returncode == 2 and "was not recorded" in missing.stderr

@@ -1,4 +1,3 @@
-import itertools
 from collections import deque
 
 import numpy as np
@@ -6,7 +5,6 @@ import pytest
 from pyperplan import planner as pyperplan
 
 from hnsdt.envs import KeyDoorEnv, load_layout
-from hnsdt.envs.layout import MOVES
 from hnsdt.symbolic import (
     ID_TO_NAME, NAME_TO_ID, VOCAB_SIZE, SymbolicState, applicable, apply, is_valid_plan, phi, plan, plan_cost, psi,
 )

@@ -70,7 +70,7 @@ class CollectConfig:
 
 def random_start_states(layout: Layout, n: int, rng: np.random.Generator) -> np.ndarray:
     flags = rng.integers(0, 2, size=(n, layout.n_flags))
-    nk, nd = len(layout.keys), len(layout.doors)
+    nk = len(layout.keys)
     door_cells = list(layout.doors.values())
     cells = [c for c in layout.free_cells() if c != layout.goal]
     states = np.zeros((n, 2 + layout.n_flags), dtype=np.int64)

@@ -27,8 +27,6 @@ import contextlib
 import json
 import logging
 import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +44,7 @@ from lerobot.datasets import dataset_writer as _lerobot_writer  # noqa: E402
 from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
 
 from hnsdt.envs.layout import Layout  # noqa: E402
+from hnsdt.fileio import atomic_dir  # noqa: E402
 
 HNSDT_META = "meta/hnsdt.json"
 EPISODES_TABLE = "meta/hnsdt_episodes.parquet"
@@ -92,11 +91,8 @@ def write_dataset(root: str | Path, repo_id: str, layout: Layout, episodes: list
     from hnsdt.symbolic.subgoals import ID_TO_NAME
 
     root = Path(root)
-    root.parent.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=f".{root.name}.", dir=root.parent))
-    staging = work / root.name
     features = dataset_features(layout)
-    try:
+    with atomic_dir(root) as staging:
         ds = LeRobotDataset.create(repo_id, fps=fps, features=features, root=staging, use_videos=False)
         try:
             # Register the tasks in vocabulary order first, so task_index is the same on every run.
@@ -115,11 +111,6 @@ def write_dataset(root: str | Path, repo_id: str, layout: Layout, episodes: list
                          layout_text=layout.text, state_names=layout.state_names)
         (staging / HNSDT_META).write_text(json.dumps(full_meta, indent=2, sort_keys=True) + "\n")
         (staging / "README.md").write_text(card)
-        if root.exists():
-            shutil.rmtree(root)
-        staging.replace(root)
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
     return root
 
 

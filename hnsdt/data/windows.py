@@ -24,12 +24,13 @@ class Frames:
     timestep: np.ndarray  # (N,) int64, frame index within its episode
     episode_start: np.ndarray  # (N,) int64, global index of the episode's first frame
     returns_to_go: np.ndarray  # (N,) float32, undiscounted sum of this and later rewards of the episode
+    policy: np.ndarray  # (N,) str, the behaviour policy of the frame's episode ("" when unknown)
 
     def __len__(self) -> int:
         return len(self.actions)
 
 
-def frames_from_arrays(states, actions, rewards, subgoals, targets, episode, timestep) -> Frames:
+def frames_from_arrays(states, actions, rewards, subgoals, targets, episode, timestep, policy=None) -> Frames:
     episode = np.asarray(episode, dtype=np.int64)
     n = len(episode)
     starts = np.flatnonzero(np.r_[True, episode[1:] != episode[:-1]])
@@ -42,24 +43,29 @@ def frames_from_arrays(states, actions, rewards, subgoals, targets, episode, tim
         rtg[s : s + ln] = np.cumsum(rewards[s : s + ln][::-1])[::-1]
     return Frames(np.asarray(states, np.int64), np.asarray(actions, np.int64).reshape(n), rewards,
                   np.asarray(subgoals, np.int64).reshape(n), np.asarray(targets, np.int64).reshape(n, 2),
-                  episode, np.asarray(timestep, np.int64).reshape(n), episode_start, rtg)
+                  episode, np.asarray(timestep, np.int64).reshape(n), episode_start, rtg,
+                  np.asarray(policy if policy is not None else [""] * n, dtype=object))
 
 
 def load_frames(root: str | Path) -> Frames:
-    from hnsdt.data.lerobot_io import open_dataset
+    from hnsdt.data.lerobot_io import episode_table, open_dataset
 
     ds = open_dataset(root)
     cols = ds.hf_dataset.with_format("numpy")[:]
+    policies = episode_table(root).set_index("episode_index")["policy"]
     return frames_from_arrays(np.stack(cols["observation.state"]), np.ravel(cols["action"]),
                               np.ravel(cols["next.reward"]), np.ravel(cols["subgoal"]),
-                              np.stack(cols["subgoal.target"]), cols["episode_index"], cols["frame_index"])
+                              np.stack(cols["subgoal.target"]), cols["episode_index"], cols["frame_index"],
+                              policies.loc[cols["episode_index"]].to_numpy())
 
 
-def window_ends(frames: Frames, condition: str) -> np.ndarray:
-    """Frames that end a training window: every frame with a sub-goal (HNSDT), or every frame (pure DT)."""
-    if condition == "subgoal":
-        return np.flatnonzero(frames.subgoals != 0)
-    return np.arange(len(frames))
+def window_ends(frames: Frames, condition: str, behaviours=()) -> np.ndarray:
+    """Frames that end a training window: every frame with a sub-goal (HNSDT) or every frame (pure DT), of
+    episodes collected by one of ``behaviours`` (all episodes when empty). Context reaches into any frame."""
+    keep = frames.subgoals != 0 if condition == "subgoal" else np.ones(len(frames), dtype=bool)
+    if len(behaviours):
+        keep &= np.isin(frames.policy, list(behaviours))
+    return np.flatnonzero(keep)
 
 
 def make_windows(frames: Frames, ends: np.ndarray, h: int, condition: str) -> dict[str, np.ndarray]:

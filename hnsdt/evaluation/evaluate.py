@@ -109,18 +109,15 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
     """Run every cell, write ``episodes.csv``, ``summary.csv``, ``metrics.json`` and the episode recordings
     under ``out_dir`` (built in a temporary folder, moved into place when complete)."""
     import json
-    import os
-    import shutil
-    import tempfile
 
     from tqdm import tqdm
 
+    from hnsdt.fileio import atomic_dir
     from hnsdt.logs import record_from_episode, write_mcap, write_rrd
 
     out = Path(out_dir)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
+    with atomic_dir(out) as tmp:
+        tmp.mkdir()
         rows = []
         cells = [(m, e, fi, f, s) for m in settings["methods"] for e in settings["envs"]
                  for fi, f in enumerate(settings["fail_probs"]) for s in settings["seeds"]]
@@ -148,9 +145,4 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
         summ = summary(table)
         summ.to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
         (tmp / "metrics.json").write_text(json.dumps(metrics_json(summ), indent=2, sort_keys=True) + "\n")
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(tmp, out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     return table

@@ -8,10 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
-import shutil
 import subprocess
-import tempfile
 from pathlib import Path
 
 import matplotlib
@@ -21,6 +18,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
+
+from hnsdt.fileio import atomic_dir  # noqa: E402
 
 METHOD_LABELS = {"hnsdt": "HNSDT (ours)", "pure_dt": "Pure DT", "symbolic": "BFS + controllers"}
 METRICS = [("success", "success rate"), ("steps", "steps (successful episodes)"), ("reward", "average reward")]
@@ -116,10 +115,8 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
         raise FileNotFoundError(f"{summary_path}: no evaluation summary (run `dvc repro evaluate`)")
     summ = pd.read_csv(summary_path)
     episodes = pd.read_csv(results / "episodes.csv", keep_default_na=False)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
-        (tmp / "figures").mkdir()
+    with atomic_dir(out) as tmp:
+        (tmp / "figures").mkdir(parents=True)
         comparison_figure(summ, tmp / "figures" / "comparison.png")
         heatmap_figure(summ, tmp / "figures" / "success_heatmap.png")
         outs = lock_outputs(lock_path)
@@ -154,9 +151,4 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
         (tmp / "report.md").write_text("\n".join(text))
         (tmp / "provenance.json").write_text(json.dumps(
             {"git_revision": rev, "params_digest": digest, "inputs": inputs}, indent=2, sort_keys=True) + "\n")
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(tmp, out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     return out / "report.md"

@@ -8,9 +8,6 @@ otherwise. Same seed on CPU ⇒ same weights. A checkpoint is a folder with ``mo
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -20,6 +17,7 @@ from safetensors.torch import load_file, save_file
 from tqdm import tqdm
 
 from hnsdt.data.windows import Frames, make_windows, window_ends
+from hnsdt.fileio import atomic_dir
 from hnsdt.models.dt import DecisionTransformer, DTConfig
 
 
@@ -33,6 +31,7 @@ class TrainConfig:
     device: str = "auto"  # "auto" = cuda if available, else cpu
     threads: int = 0  # torch CPU threads; 0 = torch's default
     log_every: int = 10  # one training-curve row per this many steps
+    behaviours: tuple[str, ...] = ()  # train on episodes of these collection behaviours (empty = all)
 
 
 def pick_device(name: str) -> torch.device:
@@ -59,9 +58,10 @@ def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bo
     device = pick_device(cfg.device)
     model = DecisionTransformer(model_cfg).to(device)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    ends = window_ends(frames, model_cfg.condition)
+    ends = window_ends(frames, model_cfg.condition, cfg.behaviours)
     if len(ends) == 0:
-        raise ValueError("no training windows: the dataset has no frames with a sub-goal")
+        raise ValueError(f"no training windows: no {model_cfg.condition} frames from behaviours "
+                         f"{list(cfg.behaviours) or 'any'} in the dataset")
     steps_per_epoch = int(np.ceil(len(ends) / cfg.batch_size))
     total_steps = cfg.epochs * steps_per_epoch
     if cfg.max_steps:
@@ -100,18 +100,12 @@ def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bo
 def save_checkpoint(model: DecisionTransformer, out_dir: str | Path, extra: dict | None = None) -> Path:
     """Write ``model.safetensors`` and ``config.json`` into ``out_dir`` atomically (temp folder, rename)."""
     out = Path(out_dir)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
+    with atomic_dir(out) as tmp:
+        tmp.mkdir()
         state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
         save_file(state, str(tmp / "model.safetensors"))
         meta = {"model": model.cfg.to_dict(), **(extra or {})}
         (tmp / "config.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(tmp, out)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
     return out
 
 

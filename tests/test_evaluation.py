@@ -1,0 +1,44 @@
+import math
+
+import pandas as pd
+import pytest
+
+from hnsdt.evaluation.evaluate import metrics_json, per_seed_metrics, summary
+
+
+def _table():
+    rows = []
+    # seed 0: 3 episodes, 2 successes (steps 10, 20), rewards 0.0, -1.0, -2.5
+    for success, steps, reward in [(True, 10, 0.0), (True, 20, -1.0), (False, 25, -2.5)]:
+        rows.append({"method": "m", "env": "e", "fail_prob": 0.1, "seed": 0, "success": success, "steps": steps,
+                     "reward": reward})
+    # seed 1: 2 episodes, 1 success (steps 12), rewards 0.2, -2.5
+    for success, steps, reward in [(True, 12, 0.2), (False, 25, -2.5)]:
+        rows.append({"method": "m", "env": "e", "fail_prob": 0.1, "seed": 1, "success": success, "steps": steps,
+                     "reward": reward})
+    return pd.DataFrame(rows)
+
+
+def test_per_seed_metrics_use_successful_episodes_for_steps():
+    per = per_seed_metrics(_table()).set_index("seed")
+    assert per.loc[0, "success"] == pytest.approx(2 / 3)
+    assert per.loc[0, "steps"] == pytest.approx(15.0)
+    assert per.loc[0, "reward"] == pytest.approx(-3.5 / 3)
+    assert per.loc[1, "success"] == pytest.approx(0.5) and per.loc[1, "steps"] == pytest.approx(12.0)
+
+
+def test_summary_is_mean_and_std_over_seeds():
+    row = summary(_table()).iloc[0]
+    assert row.success_mean == pytest.approx((2 / 3 + 0.5) / 2)
+    assert row.success_std == pytest.approx(pd.Series([2 / 3, 0.5]).std())
+    assert row.steps_mean == pytest.approx(13.5) and row.seeds == 2
+    nested = metrics_json(summary(_table()))
+    assert nested["e"]["m"]["fail_0.1"]["success_mean"] == pytest.approx(round((2 / 3 + 0.5) / 2, 4))
+
+
+def test_no_success_gives_missing_steps_not_zero():
+    t = _table()
+    t["success"] = False
+    row = summary(t).iloc[0]
+    assert row.success_mean == 0 and math.isnan(row.steps_mean)
+    assert metrics_json(summary(t))["e"]["m"]["fail_0.1"]["steps_mean"] is None
