@@ -92,6 +92,23 @@ def summary(table: pd.DataFrame) -> pd.DataFrame:
     return out.fillna({"success_std": 0.0, "steps_std": 0.0, "reward_std": 0.0}).reset_index()
 
 
+def add_optimum(summ: pd.DataFrame, envs: dict[str, dict]) -> pd.DataFrame:
+    """Attach the exact optimum of each env × fail_prob (value iteration, :mod:`hnsdt.oracle`) and every
+    method's ratios to it: success / optimal success, steps / optimal expected steps, and the regret
+    V* − V^π in expected return."""
+    from hnsdt.oracle import optimum
+
+    opt = {(e, f): optimum(envs[e]["layout"], f, envs[e]["max_steps"]) for e, f in set(zip(summ.env, summ.fail_prob))}
+    out = summ.copy()
+    out["opt_success"] = [opt[(e, f)].success for e, f in zip(out.env, out.fail_prob)]
+    out["opt_steps"] = [opt[(e, f)].steps for e, f in zip(out.env, out.fail_prob)]
+    out["opt_reward"] = [opt[(e, f)].ret for e, f in zip(out.env, out.fail_prob)]
+    out["success_ratio"] = out.success_mean / out.opt_success
+    out["steps_ratio"] = out.steps_mean / out.opt_steps
+    out["regret"] = out.opt_reward - out.reward_mean
+    return out
+
+
 def metrics_json(summ: pd.DataFrame) -> dict:
     """Nested {env: {method: {fail_prob: {metric: value}}}} for `dvc metrics show`."""
     out: dict = {}
@@ -99,7 +116,8 @@ def metrics_json(summ: pd.DataFrame) -> dict:
         cell = out.setdefault(row.env, {}).setdefault(row.method, {})
         cell[f"fail_{row.fail_prob:g}"] = {
             k: (None if pd.isna(getattr(row, k)) else round(float(getattr(row, k)), 4))
-            for k in ("success_mean", "success_std", "steps_mean", "steps_std", "reward_mean", "reward_std")
+            for k in ("success_mean", "success_std", "steps_mean", "steps_std", "reward_mean", "reward_std",
+                      "success_ratio", "steps_ratio", "regret") if k in summ
         }
     return out
 
@@ -142,7 +160,7 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
                 table[col] = ""
         table[["rrd", "mcap"]] = table[["rrd", "mcap"]].fillna("")
         table.to_csv(tmp / "episodes.csv", index=False)
-        summ = summary(table)
+        summ = add_optimum(summary(table), envs)
         summ.to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
         (tmp / "metrics.json").write_text(json.dumps(metrics_json(summ), indent=2, sort_keys=True) + "\n")
     return table

@@ -100,13 +100,60 @@ def heatmap_figure(summ: pd.DataFrame, path: Path) -> None:
     plt.close(fig)
 
 
+def regret_figure(summ: pd.DataFrame, path: Path) -> None:
+    envs = list(dict.fromkeys(summ.env))
+    fig, axes = plt.subplots(1, len(envs), figsize=(5 * len(envs), 3.8), squeeze=False)
+    for j, env in enumerate(envs):
+        ax = axes[0, j]
+        for method in dict.fromkeys(summ.method):
+            d = summ[(summ.env == env) & (summ.method == method)].sort_values("fail_prob")
+            ax.errorbar(d.fail_prob, d.regret, yerr=d.reward_std, marker="o", capsize=3, label=_label(method))
+        ax.set_title(f"{env}: regret V* - V^pi (expected return)")
+        ax.set_xlabel("action failure probability")
+        ax.axhline(0, color="k", lw=0.8)
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _fmt(v, spec=".3f", dash="–"):
+    return dash if pd.isna(v) else format(v, spec)
+
+
 def _table(summ: pd.DataFrame) -> str:
-    lines = ["| env | method | fail_prob | success | steps (success) | reward |", "|---|---|---|---|---|---|"]
+    lines = ["| env | method | fail_prob | success | steps (success) | reward | success / opt | steps / opt | "
+             "regret |", "|---|---|---|---|---|---|---|---|---|"]
     for r in summ.itertuples():
         steps = "–" if pd.isna(r.steps_mean) else f"{r.steps_mean:.1f} ± {r.steps_std:.1f}"
         lines.append(f"| {r.env} | {_label(r.method)} | {r.fail_prob:g} | {r.success_mean:.3f} ± "
-                     f"{r.success_std:.3f} | {steps} | {r.reward_mean:.3f} ± {r.reward_std:.3f} |")
+                     f"{r.success_std:.3f} | {steps} | {r.reward_mean:.3f} ± {r.reward_std:.3f} | "
+                     f"{_fmt(r.success_ratio)} | {_fmt(r.steps_ratio)} | {_fmt(r.regret)} |")
     return "\n".join(lines)
+
+
+def _optimum_table(summ: pd.DataFrame) -> str:
+    cells = summ.drop_duplicates(["env", "fail_prob"]).sort_values(["env", "fail_prob"])
+    lines = ["| env | fail_prob | optimal success | optimal expected steps | optimal expected return |",
+             "|---|---|---|---|---|"]
+    lines += [f"| {r.env} | {r.fail_prob:g} | {r.opt_success:.4f} | {r.opt_steps:.2f} | {r.opt_reward:.3f} |"
+              for r in cells.itertuples()]
+    return "\n".join(lines)
+
+
+def _target_lines(summ: pd.DataFrame) -> list[str]:
+    """Issue 5's target for HNSDT: success >= 0.98 x optimal and steps <= 1.05 x optimal, in every cell."""
+    rows = summ[summ.method == "hnsdt"]
+    if rows.empty:
+        return []
+    met = (rows.success_ratio >= 0.98) & (rows.steps_ratio <= 1.05)
+    out = [f"HNSDT meets the target (success ≥ 0.98 × optimal and steps ≤ 1.05 × optimal) in {int(met.sum())} of "
+           f"{len(rows)} env × fail_prob cells."]
+    for r in rows[~met].itertuples():
+        out.append(f"- misses at {r.env}, fail_prob {r.fail_prob:g}: success ratio {_fmt(r.success_ratio)}, "
+                   f"steps ratio {_fmt(r.steps_ratio)}")
+    return out
 
 
 def write_report(params: dict, results: Path, out: Path, lock_path: str | Path = "dvc.lock") -> Path:
@@ -119,6 +166,9 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
         (tmp / "figures").mkdir(parents=True)
         comparison_figure(summ, tmp / "figures" / "comparison.png")
         heatmap_figure(summ, tmp / "figures" / "success_heatmap.png")
+        has_optimum = "regret" in summ
+        if has_optimum:
+            regret_figure(summ, tmp / "figures" / "regret.png")
         outs = lock_outputs(lock_path)
         inputs = {p: md5 for p, md5 in sorted(outs.items()) if p.startswith(("data/", "models/"))}
         envs, methods = sorted(set(summ.env)), sorted(set(summ.method))
@@ -142,7 +192,15 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
             "![heatmap](figures/success_heatmap.png)", "",
             "Success rate for every method × (environment, failure probability) (the paper's robustness "
             "figure). Made from `results/summary.csv`.", "",
-            "## Numbers", "", _table(summ), "",
+            *([
+                "## Distance to the exact optimum", "",
+                "![regret](figures/regret.png)", "",
+                "Regret V* − V^π in expected return per method across failure probabilities; V* from finite-horizon "
+                "value iteration over the full MDP (`hnsdt/oracle.py`). Made from `results/summary.csv`.", "",
+                _optimum_table(summ), "", *_target_lines(summ), "",
+            ] if has_optimum else []),
+            "## Numbers", "", _table(summ) if has_optimum else _table(summ.assign(
+                success_ratio=np.nan, steps_ratio=np.nan, regret=np.nan)), "",
             "## Replaying episodes", "",
             f"{len(recorded)} evaluated episodes have recordings; `hnsdt replay EPISODE_ID` prints their "
             "`.rrd` (rerun) and `.mcap` (Foxglove) paths, e.g. "
