@@ -1,0 +1,47 @@
+import numpy as np
+import pytest
+
+from hnsdt.agents import SymbolicAgent, rollout
+from hnsdt.envs import KeyDoorVectorEnv, load_layout
+from hnsdt.oracle import MDP, optimum
+from hnsdt.symbolic import SymbolicState, plan, plan_cost
+
+
+def test_state_counts_match_the_paper_layouts(keydoor, multikeydoor):
+    assert len(MDP(keydoor)) == 84 and len(MDP(multikeydoor)) == 4160
+
+
+@pytest.mark.parametrize("p,T", [(0.5, 3), (0.3, 5), (0.0, 2)])
+def test_value_iteration_against_a_hand_computed_corridor(p, T):
+    """'@G': move right until it works. Success at step k has probability (1-p) p^(k-1)."""
+    layout = load_layout("@G")
+    probs = np.array([(1 - p) * p ** (k - 1) for k in range(1, T + 1)])
+    success = probs.sum()
+    ret = sum(pk * (-0.1 * k + 1.0) for k, pk in enumerate(probs, 1)) + (1 - success) * (-0.1 * T)
+    steps = sum(pk * k for k, pk in enumerate(probs, 1)) / success
+    opt = optimum(layout, p, T)
+    assert opt.success == pytest.approx(success)
+    assert opt.ret == pytest.approx(ret)
+    assert opt.steps == pytest.approx(steps)
+
+
+def test_a_two_step_detour_layout_by_hand():
+    """'@a#\\n.A.G'... kept tiny: key, door, goal in a row; at fail 0 the optimum is the planner's cost."""
+    layout = load_layout("@aAG")
+    opt = optimum(layout, 0.0, 20)
+    assert opt.steps == 5 and opt.ret == pytest.approx(-0.5 + 1.0) and opt.success == 1.0
+
+
+@pytest.mark.parametrize("name,max_steps", [("keydoor_5x5", 100), ("multikeydoor_9x9", 250)])
+def test_optimum_at_fail_zero_equals_the_cheapest_plan(name, max_steps):
+    layout = load_layout(name)
+    opt = optimum(layout, 0.0, max_steps)
+    assert opt.steps == plan_cost(plan(layout, SymbolicState.initial(layout), "cost"))
+
+
+def test_symbolic_agent_is_near_optimal_in_expectation(keydoor):
+    opt = optimum(keydoor, 0.2, 100)
+    eps = rollout(KeyDoorVectorEnv(2000, keydoor, 0.2, 100), SymbolicAgent(keydoor), seed=11)
+    lengths = np.array([e.length for e in eps])
+    assert abs(lengths.mean() - opt.steps) < 4 * lengths.std() / np.sqrt(len(lengths))
+    assert opt.success > 0.999
