@@ -194,4 +194,17 @@ def evaluate_settings(params: dict) -> dict:
         "envs": _get(params, "train.envs", list), "seeds": _int_list(params, "train.seeds"),
         "fail_probs": fail_probs(params, "evaluate.fail_probs"), "episodes": episodes,
         "device": _get(params, "evaluate.device", str, "cpu"), "log_episodes": per_cell,
+        "datasets": "data/datasets", "train_behaviours": train_settings(params)["behaviours"]["hnsdt"],
     }
+
+
+def theorem_settings(params: dict) -> dict:
+    gamma = _get(params, "theorems.gamma", float)
+    bound_b = _get(params, "theorems.B", float)
+    delta = _get(params, "theorems.delta", float)
+    vc = _get(params, "theorems.vc_dimension", (int, float, str))
+    if not 0 < gamma < 1 or bound_b < 0 or not 0 < delta < 1:
+        raise _fail(params, "theorems: gamma and delta must be in (0, 1) and B >= 0")
+    if not (vc == "parameters" or (isinstance(vc, (int, float)) and not isinstance(vc, bool) and vc > 0)):
+        raise _fail(params, f"theorems.vc_dimension must be a positive number or 'parameters', got {vc!r}")
+    return {"gamma": gamma, "B": bound_b, "delta": delta, "vc_dimension": vc}

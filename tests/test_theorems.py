@@ -40,6 +40,8 @@ def test_pac_bound_formula_and_monotonicity():
     assert pac_bound(m, K, d, delta) == pytest.approx(expected)
     assert pac_bound(10 * m, K, d, delta) > pac_bound(m, K, d, delta)
     assert pac_bound(0, K, d, delta) == float("-inf")
+    assert pac_bound(100, K, 600_000, delta) == float("-inf")  # fewer segments than the VC dimension: vacuous
+    assert pac_bound(141, 5, 5, 0.05) < 1.0
 
 
 def test_theorem2_measures_episodes_with_no_failed_segment():

@@ -66,12 +66,67 @@ def run_cell(cell: Cell, fail_index: int, layout: Layout, max_steps: int, episod
     return rollout(env, agent, seed=cell_seed(cell, fail_index))
 
 
-def episode_rows(cell: Cell, episodes: list[Episode]) -> list[dict]:
-    return [{
-        "method": cell.method, "env": cell.env, "fail_prob": cell.fail_prob, "seed": cell.seed, "episode": i,
-        "episode_id": cell.episode_id(i), "success": bool(ep.success), "steps": ep.length,
-        "reward": round(ep.ret, 6), "replans": ep.replans,
-    } for i, ep in enumerate(episodes)]
+def episode_rows(cell: Cell, episodes: list[Episode], layout: Layout, plan_mode: str) -> list[dict]:
+    """One row per episode; plan-following methods also get their initial plan's length and cost and the
+    cheapest plan's cost (inputs of the Theorem 1 check)."""
+    from hnsdt.symbolic import SymbolicState, plan, plan_cost
+
+    rows = []
+    for i, ep in enumerate(episodes):
+        row = {"method": cell.method, "env": cell.env, "fail_prob": cell.fail_prob, "seed": cell.seed,
+               "episode": i, "episode_id": cell.episode_id(i), "success": bool(ep.success), "steps": ep.length,
+               "reward": round(ep.ret, 6), "replans": ep.replans,
+               "plan_length": np.nan, "plan_cost": np.nan, "optimal_plan_cost": np.nan}
+        if ep.plan:
+            s0 = SymbolicState.from_observation(layout, ep.states[0])
+            row.update(plan_length=len(ep.plan), plan_cost=plan_cost(plan(layout, s0, plan_mode)),
+                       optimal_plan_cost=plan_cost(plan(layout, s0, "cost")))
+        rows.append(row)
+    return rows
+
+
+def segment_rows(cell: Cell, episodes: list[Episode], navigator) -> list[dict]:
+    """One row per executed sub-goal segment, with the optimal expected steps to achieve its operator from the
+    segment's first state: d / (1 − fail_prob) for a shortest path of d moves, 1 for pick/open."""
+    rows = []
+    lay = navigator.layout
+    nk = len(lay.keys)
+    for i, ep in enumerate(episodes):
+        for seg in ep.segments:
+            end = seg.end if seg.end is not None else ep.length
+            if end <= seg.start:
+                continue
+            state = ep.states[seg.start]
+            target = tuple(int(v) for v in ep.subgoal_targets[seg.start])
+            if seg.operator.startswith("GoTo"):
+                mask = navigator.door_mask({d for j, d in enumerate(lay.doors) if state[2 + nk + j]})
+                dist = navigator.distance[navigator.target_index[target], mask, state[0], state[1]]
+                optimal = dist / (1 - cell.fail_prob) if dist >= 0 else np.nan
+            else:
+                optimal = 1.0
+            rows.append({"method": cell.method, "env": cell.env, "fail_prob": cell.fail_prob, "seed": cell.seed,
+                         "episode_id": cell.episode_id(i), "operator": seg.operator, "subgoal_id": seg.subgoal_id,
+                         "start": seg.start, "end": end, "steps": end - seg.start, "optimal_steps": optimal,
+                         "achieved": bool(seg.achieved)})
+    return rows
+
+
+def training_segment_counts(dataset_root: str | Path, env: str, behaviours) -> list[dict]:
+    """Sub-goal segments per operator in a dataset, over the episodes of ``behaviours`` (Theorem 2's m)."""
+    from hnsdt.data.segmentation import segments_of
+    from hnsdt.data.windows import load_frames
+    from hnsdt.symbolic.subgoals import ID_TO_NAME
+
+    frames = load_frames(dataset_root)
+    counts: dict[str, int] = {}
+    for start in np.unique(frames.episode_start):
+        idx = np.flatnonzero(frames.episode_start == start)
+        if len(behaviours) and frames.policy[idx[0]] not in behaviours:
+            continue
+        for sid, _, _ in segments_of(frames.subgoals[idx]):
+            if sid:
+                counts[ID_TO_NAME[sid]] = counts.get(ID_TO_NAME[sid], 0) + 1
+    return [{"env": env, "operator": op, "segments": n} for op, n in sorted(counts.items())]
 
 
 def per_seed_metrics(table: pd.DataFrame) -> pd.DataFrame:
@@ -133,18 +188,24 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
     from hnsdt.fileio import atomic_dir
     from hnsdt.logs import record_from_episode, write_mcap, write_rrd
 
+    from hnsdt.agents.navigation import Navigator
+
     out = Path(out_dir)
+    navigators = {e: Navigator(envs[e]["layout"]) for e in settings["envs"]}
     with atomic_dir(out) as tmp:
         tmp.mkdir()
-        rows = []
+        rows, seg_rows, params_count = [], [], {}
         cells = [(m, e, fi, f, s) for m in settings["methods"] for e in settings["envs"]
                  for fi, f in enumerate(settings["fail_probs"]) for s in settings["seeds"]]
         for method, env, fi, fail_prob, seed in tqdm(cells, desc="evaluate", unit="cell", disable=not progress):
             cell = Cell(method, env, fail_prob, seed)
             lay, max_steps = envs[env]["layout"], envs[env]["max_steps"]
             agent = make_agent(method, lay, executor, models_root, env, seed, settings["device"])
+            if hasattr(agent, "model"):
+                params_count[f"{env}/{method}"] = sum(p.numel() for p in agent.model.parameters())
             episodes = run_cell(cell, fi, lay, max_steps, settings["episodes"], agent)
-            cell_rows = episode_rows(cell, episodes)
+            cell_rows = episode_rows(cell, episodes, lay, executor.plan_mode)
+            seg_rows += segment_rows(cell, episodes, navigators[env])
             if seed == settings["seeds"][0]:
                 for i in range(settings["log_episodes"]):
                     rel = Path("logs") / method / env / f"fp{fail_prob:g}" / f"seed{seed}" / f"ep{i}"
@@ -160,6 +221,12 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
                 table[col] = ""
         table[["rrd", "mcap"]] = table[["rrd", "mcap"]].fillna("")
         table.to_csv(tmp / "episodes.csv", index=False)
+        pd.DataFrame(seg_rows).to_csv(tmp / "segments.csv", index=False)
+        counts = [r for e in settings["envs"] for r in training_segment_counts(
+            Path(settings["datasets"]) / e, e, settings["train_behaviours"])]
+        pd.DataFrame(counts, columns=["env", "operator", "segments"]).to_csv(tmp / "training_segments.csv",
+                                                                           index=False)
+        (tmp / "model_parameters.json").write_text(json.dumps(params_count, indent=2, sort_keys=True) + "\n")
         summ = add_optimum(summary(table), envs)
         summ.to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
         (tmp / "metrics.json").write_text(json.dumps(metrics_json(summ), indent=2, sort_keys=True) + "\n")

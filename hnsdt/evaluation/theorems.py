@@ -55,11 +55,12 @@ def theorem1(segments: pd.DataFrame, episodes: pd.DataFrame, summ: pd.DataFrame,
 
 
 def pac_bound(m: int, K: int, d: float, delta: float) -> float:
-    """Theorem 2's lower bound on Pr[all K sub-goals succeed]; −inf where log(e·m/d) is undefined."""
-    if m <= 0 or d <= 0:
+    """Theorem 2's lower bound on Pr[all K sub-goals succeed]. The VC argument needs m ≥ d; with fewer
+    segments than the VC dimension it says nothing, which we return as −inf (vacuous)."""
+    if m <= 0 or d <= 0 or m < d:
         return float("-inf")
     radicand = (2 * d * math.log(math.e * m / d) + 2 * math.log(4 * K / delta)) / m
-    return 1.0 - math.sqrt(max(radicand, 0.0))
+    return 1.0 - math.sqrt(radicand)
 
 
 def theorem2(segments: pd.DataFrame, episodes: pd.DataFrame, train_counts: pd.DataFrame, vc_dimension: float,
