@@ -192,7 +192,8 @@ def cmd_replay(args) -> None:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="hnsdt", description="Hierarchical Neuro-Symbolic Decision Transformer: environments, symbolic "
-        "planner, datasets. The full pipeline runs with `dvc repro`; these commands run its parts.")
+        "planner, datasets, training, evaluation, report and episode replay. The full pipeline runs with "
+        "`dvc repro`; these commands run its parts.")
     parser.add_argument("--params", default="params.yaml", help="params file (default: params.yaml)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
