@@ -64,16 +64,3 @@ def write_mcap(path: str | Path, rec: EpisodeRecord) -> Path:
         writer.close()
     tmp.replace(path)
     return path
-
-
-def count_steps(path: str | Path) -> dict[str, int]:
-    """Messages per topic in an MCAP file (used by tests and `hnsdt replay`)."""
-    from mcap.reader import make_reader
-
-    counts: dict[str, int] = {}
-    with open(path, "rb") as f:
-        for _, channel, _ in make_reader(f).iter_messages():
-            counts[channel.topic] = counts.get(channel.topic, 0) + 1
-    return counts
-
-

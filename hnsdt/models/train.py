@@ -121,9 +121,6 @@ def load_checkpoint(path: str | Path, device: str = "cpu") -> tuple[DecisionTran
     return model, meta
 
 
-def train_config_dict(cfg: TrainConfig) -> dict:
-    return asdict(cfg)
-
 
 def _train_one(args) -> tuple[int, list[dict]]:
     frames, model_cfg, cfg, out_dir, extra, position = args
