@@ -8,7 +8,7 @@ from typing import Any
 import yaml
 
 from hnsdt.agents.executor import ExecutorConfig
-from hnsdt.data.collect import POLICIES, STARTS, Behaviour, CollectConfig
+from hnsdt.data.collect import POLICIES, Behaviour, CollectConfig
 from hnsdt.envs import ENV_IDS, LayoutError, load_layout
 from hnsdt.symbolic.planner import PLAN_MODES
 
@@ -106,17 +106,15 @@ def collect_config(params: dict, name: str) -> CollectConfig:
         unknown = set(b) - {"policy", "episodes", "start", "epsilon"}
         if unknown:
             raise _fail(params, f"collect.behaviours[{i}]: unknown keys {sorted(unknown)}")
-        if b.get("policy") not in POLICIES:
-            raise _fail(params, f"collect.behaviours[{i}].policy must be one of {POLICIES}, got {b.get('policy')!r}")
-        if b.get("start", "layout") not in STARTS:
-            raise _fail(params, f"collect.behaviours[{i}].start must be one of {STARTS}, got {b.get('start')!r}")
-        episodes = b.get("episodes")
-        if not isinstance(episodes, int) or isinstance(episodes, bool) or episodes < 0:
-            raise _fail(params, f"collect.behaviours[{i}].episodes must be an integer >= 0, got {episodes!r}")
-        eps = b.get("epsilon", 0.0)
-        if not isinstance(eps, (int, float)) or not 0 <= eps <= 1:
-            raise _fail(params, f"collect.behaviours[{i}].epsilon must be in [0, 1], got {eps!r}")
-        behaviours.append(Behaviour(b["policy"], episodes, b.get("start", "layout"), float(eps)))
+        episodes, eps = b.get("episodes"), b.get("epsilon", 0.0)
+        if not isinstance(episodes, int) or isinstance(episodes, bool):
+            raise _fail(params, f"collect.behaviours[{i}].episodes must be an integer, got {episodes!r}")
+        if not isinstance(eps, (int, float)) or isinstance(eps, bool):
+            raise _fail(params, f"collect.behaviours[{i}].epsilon must be a number, got {eps!r}")
+        try:  # the values themselves are checked by Behaviour, for library callers too
+            behaviours.append(Behaviour(b.get("policy"), episodes, b.get("start", "layout"), float(eps)))
+        except ValueError as e:
+            raise _fail(params, f"collect.behaviours[{i}].{e}") from None
     fps = _get(params, "collect.fps", int, 10)
     if fps < 1:
         raise _fail(params, f"collect.fps must be >= 1, got {fps}")

@@ -36,7 +36,8 @@ class HierarchicalAgent:
                 np.array([g.target for g in goals], dtype=np.int64).reshape(-1, 2))
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        ids, targets = self.subgoals()
+        """Actions for the current operators; their sub-goals stay in ``last_subgoals`` for the caller."""
+        self.last_subgoals = ids, targets = self.subgoals()
         return self.low_level(obs, ids, targets)
 
     def low_level(self, obs: np.ndarray, subgoal_ids: np.ndarray, targets: np.ndarray) -> np.ndarray:

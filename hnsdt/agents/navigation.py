@@ -22,6 +22,9 @@ class Navigator:
         self.targets: list[Cell] = [*layout.keys.values(), *layout.doors.values(), *layout.items.values(),
                                     layout.goal]
         self.target_index = {cell: i for i, cell in enumerate(self.targets)}
+        self.target_grid = np.zeros(layout.shape, dtype=np.int64)  # cell -> target index, for batches
+        for cell, i in self.target_index.items():
+            self.target_grid[cell] = i
         n_masks = 1 << len(layout.doors)
         h, w = layout.shape
         self.first_move = np.full((len(self.targets), n_masks, h, w), NO_MOVE, dtype=np.int64)

@@ -2,7 +2,7 @@
 
 An agent is anything with ``reset(obs)``, ``act(obs) -> actions``, ``observe(obs, active, actions, rewards)``
 (the copies live during the step, and what they did and got) and ``finish()``;
-``subgoals()`` (ids and target cells) is recorded when the agent has it, and ``executors`` (one
+``last_subgoals`` (ids and target cells chosen by ``act``) is recorded when the agent has it, and ``executors`` (one
 :class:`PlanExecutor` per copy) supply the plan, sub-goal segments and replans of each episode.
 """
 
@@ -74,13 +74,12 @@ def rollout(env: KeyDoorVectorEnv, agent, seed: int, start_states: np.ndarray | 
     sub_targets = np.full((horizon, n, 2), -1, dtype=np.int64)
     lengths = np.zeros(n, dtype=np.int64)
     states[0] = obs
-    has_subgoals = hasattr(agent, "subgoals")
     t = 0
     while not env.done.all():
         active = ~env.done
-        if has_subgoals:
-            sub_ids[t], sub_targets[t] = agent.subgoals()
         a = np.asarray(agent.act(obs), dtype=np.int64)
+        if hasattr(agent, "last_subgoals"):
+            sub_ids[t], sub_targets[t] = agent.last_subgoals
         if epsilon > 0:
             a = np.where(noise.random(n) < epsilon, noise.integers(0, N_ACTIONS, n), a)
         obs, r, _, _, _ = env.step(a)

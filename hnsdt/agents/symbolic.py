@@ -28,6 +28,6 @@ class SymbolicAgent(HierarchicalAgent):
     def low_level(self, obs: np.ndarray, subgoal_ids: np.ndarray, targets: np.ndarray) -> np.ndarray:
         masks = obs[:, self._door_cols] @ self._door_bits
         has_goal = subgoal_ids > 0
-        target_idx = np.array([self.navigator.target_index.get(tuple(t), 0) for t in targets], dtype=np.int64)
+        target_idx = self.navigator.target_grid[targets[:, 0], targets[:, 1]]  # (-1, -1) rows are masked below
         actions = self.navigator.controller_actions(target_idx, masks, obs[:, :2])
         return np.where(has_goal, actions, PICK)  # nothing to pursue (done or trapped): a harmless no-op

@@ -41,10 +41,11 @@ class Behaviour:
     epsilon: float = 0.0
 
     def __post_init__(self):
+        # Messages start with the field's name, so params errors read "collect.behaviours[i].<field> ...".
         if self.policy not in POLICIES:
-            raise ValueError(f"unknown behaviour policy {self.policy!r}; expected one of {POLICIES}")
+            raise ValueError(f"policy must be one of {POLICIES}, got {self.policy!r}")
         if self.start not in STARTS:
-            raise ValueError(f"unknown start {self.start!r}; expected one of {STARTS}")
+            raise ValueError(f"start must be one of {STARTS}, got {self.start!r}")
         if int(self.episodes) < 0:
             raise ValueError(f"episodes must be >= 0, got {self.episodes}")
         if not 0.0 <= float(self.epsilon) <= 1.0:
