@@ -89,41 +89,93 @@ def cmd_collect(args) -> None:
     print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
 
 
-def cmd_train(args) -> None:
-    from dataclasses import replace
+def _train_dt(params, args, seed: int, out: Path) -> tuple[list[dict], dict]:
+    from dataclasses import asdict, replace
 
     import numpy as np
-    import pandas as pd
 
-    from hnsdt.config import load_params, model_config, train_settings
+    from hnsdt.config import model_config, train_settings
     from hnsdt.data.windows import load_frames
     from hnsdt.evaluation.evaluate import LEARNED
-    from hnsdt.fileio import atomic_dir
-    from hnsdt.models.train import train_seeds
+    from hnsdt.models.train import save_checkpoint, train_dt
 
-    params = load_params(args.params)
     ts = train_settings(params)
-    if args.env not in ts["envs"]:
-        raise ValueError(f"env {args.env!r} is not in train.envs {ts['envs']}")
     if args.method not in ts["methods"]:
         raise ValueError(f"method {args.method!r} is not in train.methods {ts['methods']}")
     model_cfg = model_config(params, args.env, LEARNED[args.method])
     dataset = Path(args.dataset or f"data/datasets/{args.env}")
     frames = load_frames(dataset)
+    cfg = replace(ts["config"], seed=seed, behaviours=ts["behaviours"][args.method])
+    model, curve = train_dt(frames, model_cfg, cfg, progress=not args.quiet, desc=f"{args.method} seed {seed}")
     starts = np.unique(frames.episode_start)
-    extra = {"env": args.env, "method": args.method, "dataset": str(dataset),
-             "target_return": float(frames.returns_to_go[starts].max())}  # pure DT: the best return in the data
-    out = Path(args.out or f"models/{args.env}/{args.method}")
-    cfg = replace(ts["config"], behaviours=ts["behaviours"][args.method])
-    with atomic_dir(out) as tmp:
-        curves = train_seeds(frames, model_cfg, cfg, ts["seeds"], tmp, ts["workers"], extra)
-    rows = [dict(row, seed=seed) for seed, curve in sorted(curves.items()) for row in curve]
-    plot = Path(args.curve or f"plots/train/{args.env}-{args.method}.csv")
+    used = np.isin(frames.policy, list(cfg.behaviours)) if cfg.behaviours else np.ones(len(frames), bool)
+    usage = {"dataset_frames": int(used.sum()), "windows_seen": curve[-1]["windows_seen"],
+             "gradient_steps": curve[-1]["step"]}
+    save_checkpoint(model, out, {"env": args.env, "method": args.method, "seed": seed, "dataset": str(dataset),
+                                 "target_return": float(frames.returns_to_go[starts].max()),  # pure DT's target
+                                 "train": asdict(cfg), "usage": usage, "curve": curve})
+    return curve, usage
+
+
+def _train_baseline(params, args, seed: int, out: Path) -> tuple[list[dict], dict]:
+    from dataclasses import asdict
+
+    from hnsdt.config import baseline_lists, baseline_settings
+    from hnsdt.methods import METHODS
+    from hnsdt.models.checkpoint import save_checkpoint
+
+    kind = "offline" if METHODS[args.method].training == "dataset" else "online"
+    listed = baseline_lists(params)[kind]
+    if args.method not in listed:
+        raise ValueError(f"method {args.method!r} is not in baselines.{kind} {listed}")
+    bs = baseline_settings(params, args.method, args.env, seed)
+    desc = f"{args.method} seed {seed}"
+    extra = {"env": args.env, "method": args.method, "seed": seed}
+    if kind == "offline":
+        from hnsdt.agents.baselines.recurrent import train_recurrent
+        from hnsdt.data.windows import load_frames
+
+        dataset = Path(args.dataset or f"data/datasets/{args.env}")
+        model, curve, usage = train_recurrent(load_frames(dataset), bs["model"], bs["train"],
+                                              progress=not args.quiet, desc=desc)
+        extra["dataset"] = str(dataset)
+    else:
+        if args.method == "dqn":
+            from hnsdt.agents.baselines.dqn import train_dqn as train
+        else:
+            from hnsdt.agents.baselines.options import train_options as train
+        env = bs["env"]
+        model, curve, usage = train(env["layout"], env["max_steps"], bs["model"], bs["train"],
+                                    progress=not args.quiet, desc=desc)
+    save_checkpoint(model, out, {**extra, "train": asdict(bs["train"]), "usage": usage, "curve": curve})
+    return curve, usage
+
+
+def cmd_train(args) -> None:
+    import pandas as pd
+
+    from hnsdt.config import env_settings, load_params, train_settings
+    from hnsdt.methods import DT_METHODS
+
+    params = load_params(args.params)
+    envs = train_settings(params)["envs"]
+    if args.env not in envs:
+        raise ValueError(f"env {args.env!r} is not in train.envs {envs}")
+    env_settings(params, args.env)
+    out = Path(args.out or f"models/{args.env}/{args.method}/seed{args.seed}")
+    curve, usage = (_train_dt if args.method in DT_METHODS else _train_baseline)(params, args, args.seed, out)
+    plot = Path(args.curve or f"plots/train/{args.env}-{args.method}-seed{args.seed}.csv")
     plot.parent.mkdir(parents=True, exist_ok=True)
-    pd.DataFrame(rows)[["seed", "step", "epoch", "windows_seen", "loss"]].to_csv(plot, index=False)
-    final = {seed: curve[-1]["loss"] for seed, curve in curves.items()}
-    print(f"trained {args.method} on {args.env}: seeds {sorted(final)}, final loss "
-          + ", ".join(f"{v:.4f}" for _, v in sorted(final.items())) + f" -> {out}")
+    tmp = plot.with_name(f".{plot.name}.tmp")
+    pd.DataFrame(curve).to_csv(tmp, index=False)
+    tmp.replace(plot)
+    facts = ", ".join(f"{k} {v}" for k, v in usage.items())
+    print(f"trained {args.method} on {args.env}, seed {args.seed}: {facts}; final {_last_metric(curve)} -> {out}")
+
+
+def _last_metric(curve: list[dict]) -> str:
+    last = curve[-1] if curve else {}
+    return ", ".join(f"{k} {last[k]:.4f}" for k in ("loss", "success") if k in last and last[k] == last[k])
 
 
 def cmd_evaluate(args) -> None:
@@ -189,6 +241,10 @@ def cmd_replay(args) -> None:
         subprocess.Popen([viewer, str(paths[0])])
 
 
+LEARNED_NAMES = ("hnsdt", "pure_dt", "lstm_hier", "gru", "dqn", "options")  # = hnsdt.methods.LEARNED, kept
+# literal so `--help` does not import the library
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="hnsdt", description="Hierarchical Neuro-Symbolic Decision Transformer: environments, symbolic "
@@ -221,12 +277,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_collect)
 
-    p = sub.add_parser("train", help="train one learned method on one env, every seed (the `train` stage)")
-    p.add_argument("--env", required=True)
-    p.add_argument("--method", required=True, choices=["hnsdt", "pure_dt"])
-    p.add_argument("--dataset", help="LeRobot dataset folder (default: data/datasets/ENV)")
-    p.add_argument("--out", help="checkpoint folder (default: models/ENV/METHOD)")
-    p.add_argument("--curve", help="training-curve CSV (default: plots/train/ENV-METHOD.csv)")
+    p = sub.add_parser("train", help="train one learned method on one env with one seed (the `train`, "
+                       "`train_offline` and `train_online` stages)")
+    p.add_argument("--env", required=True, help="env name from train.envs")
+    p.add_argument("--method", required=True, choices=list(LEARNED_NAMES))
+    p.add_argument("--seed", type=int, required=True)
+    p.add_argument("--dataset", help="offline methods: LeRobot dataset folder (default: data/datasets/ENV)")
+    p.add_argument("--out", help="checkpoint folder (default: models/ENV/METHOD/seedSEED)")
+    p.add_argument("--curve", help="training-curve CSV (default: plots/train/ENV-METHOD-seedSEED.csv)")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("evaluate", help="evaluate every method x env x fail_prob x seed (the `evaluate` stage)")

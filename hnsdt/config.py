@@ -11,9 +11,10 @@ from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.data.collect import POLICIES, Behaviour, CollectConfig
 from hnsdt.envs import ENV_IDS, LayoutError, load_layout
 from hnsdt.symbolic.planner import PLAN_MODES
+from hnsdt.methods import DT_METHODS, METHODS, OFFLINE_BASELINES, ONLINE_BASELINES
 
-LEARNED_METHODS = ("hnsdt", "pure_dt")
-EVAL_METHODS = ("hnsdt", "pure_dt", "symbolic")
+LEARNED_METHODS = DT_METHODS  # the decision transformers, configured under `train`
+EVAL_METHODS = tuple(METHODS)
 
 
 class ParamsError(ValueError):
@@ -163,10 +164,11 @@ def train_settings(params: dict) -> dict:
         env_settings(params, e)
     out = {
         "envs": envs, "methods": _names(params, "train.methods", LEARNED_METHODS),
-        "seeds": _int_list(params, "train.seeds"), "workers": _get(params, "train.workers", int, 1),
+        "seeds": _int_list(params, "train.seeds"),
         "config": TrainConfig(epochs=_get(params, "train.epochs", int), batch_size=_get(params, "train.batch_size", int),
                               lr=_get(params, "train.lr", float), max_steps=_get(params, "train.max_steps", int, 0),
-                              device=_get(params, "train.device", str, "auto")),
+                              device=_get(params, "train.device", str, "auto"),
+                              threads=_get(params, "train.threads", int, 0)),
     }
     behaviours = _get(params, "train.behaviours", dict, {})
     for method, names in behaviours.items():
@@ -175,9 +177,108 @@ def train_settings(params: dict) -> dict:
                         f"in {LEARNED_METHODS}; got {names!r}")
     out["behaviours"] = {m: tuple(behaviours.get(m, [])) for m in LEARNED_METHODS}
     cfg = out["config"]
-    if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.max_steps < 0 or out["workers"] < 1:
-        raise _fail(params, "train: epochs, batch_size, workers must be >= 1, lr > 0 and max_steps >= 0")
+    if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.max_steps < 0 or cfg.threads < 0:
+        raise _fail(params, "train: epochs and batch_size must be >= 1, lr > 0, max_steps and threads >= 0")
     return out
+
+
+def baseline_lists(params: dict) -> dict[str, list[str]]:
+    """The baselines to train: ``baselines.offline`` (on the dataset) and ``baselines.online``."""
+    out = {}
+    for kind, allowed in (("offline", OFFLINE_BASELINES), ("online", ONLINE_BASELINES)):
+        values = _get(params, f"baselines.{kind}", list, [])
+        bad = [v for v in values if v not in allowed]
+        if bad:
+            raise _fail(params, f"baselines.{kind}: unknown name(s) {bad!r}; expected some of {list(allowed)}")
+        out[kind] = values
+    return out
+
+
+def _fill(params: dict, key: str, cls, section: dict, **fixed):
+    """A dataclass from the entries of ``section`` that name its fields, each checked against the type of
+    the field's default (tuples come from lists)."""
+    import dataclasses
+
+    values = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in section or f.name in fixed:
+            continue
+        v, default = section[f.name], f.default
+        if isinstance(default, tuple):
+            if not isinstance(v, list):
+                raise _fail(params, f"{key}.{f.name} must be a list, got {v!r}")
+            v = tuple(v)
+        elif isinstance(default, bool) or isinstance(v, bool):
+            if not isinstance(v, bool) or not isinstance(default, bool):
+                raise _fail(params, f"{key}.{f.name} must be {type(default).__name__}, got {v!r}")
+        elif isinstance(default, float) and isinstance(v, (int, float)):
+            v = float(v)
+        elif not isinstance(v, type(default)):
+            raise _fail(params, f"{key}.{f.name} must be {type(default).__name__}, got {v!r}")
+        values[f.name] = v
+    try:
+        return cls(**values, **fixed)
+    except (TypeError, ValueError) as e:
+        raise _fail(params, f"{key}: {e}") from None
+
+
+def baseline_settings(params: dict, method: str, env_name: str, seed: int) -> dict:
+    """Network config, training config and evaluation knobs of one baseline on one env and seed, from
+    ``baselines.<method>``; unknown keys and wrongly typed values are errors."""
+    import dataclasses
+
+    from hnsdt.models.train import pick_device
+
+    if method not in OFFLINE_BASELINES + ONLINE_BASELINES:
+        raise _fail(params, f"{method!r} is not a baseline; expected one of "
+                    f"{list(OFFLINE_BASELINES + ONLINE_BASELINES)}")
+    key = f"baselines.{method}"
+    section = dict(_get(params, key, dict))
+    env = env_settings(params, env_name)
+    lay = env["layout"]
+    device = str(pick_device(_get(params, "train.device", str, "auto")))
+    grid = {"n_flags": lay.n_flags, "grid_h": lay.shape[0], "grid_w": lay.shape[1]}
+    if method in OFFLINE_BASELINES:
+        from hnsdt.agents.baselines.recurrent import RecurrentTrainConfig
+        from hnsdt.models.recurrent import RecurrentConfig
+
+        behaviours = section.get("behaviours", [])
+        if not isinstance(behaviours, list) or not set(behaviours) <= set(POLICIES):
+            raise _fail(params, f"{key}.behaviours must be a list drawn from {POLICIES}, got {behaviours!r}")
+        net_cls, train_cls = RecurrentConfig, RecurrentTrainConfig
+        net_fixed = {"cell": "lstm" if method == "lstm_hier" else "gru", "hierarchical": method == "lstm_hier", **grid}
+        train_fixed = {"seed": seed, "device": device, "behaviours": tuple(behaviours)}
+        extra = {}
+    else:
+        from hnsdt.models.qnetwork import OptionCriticConfig, QNetworkConfig
+
+        if method == "dqn":
+            from hnsdt.agents.baselines.dqn import DQNConfig as train_cls
+            net_cls = QNetworkConfig
+        else:
+            from hnsdt.agents.baselines.options import OptionsConfig as train_cls
+            net_cls = OptionCriticConfig
+        budget = section.get("env_steps")
+        if isinstance(budget, dict):
+            budget = budget.get(env_name)
+        if not isinstance(budget, int) or isinstance(budget, bool) or budget < 1:
+            raise _fail(params, f"{key}.env_steps must be a positive integer or a mapping env -> one "
+                        f"(missing or bad for {env_name!r}: {section.get('env_steps')!r})")
+        probs = fail_probs(params, f"{key}.fail_probs") if "fail_probs" in section else None
+        net_fixed = grid
+        train_fixed = {"seed": seed, "device": device, "env_steps": budget,
+                       **({"fail_probs": tuple(probs)} if probs else {})}
+        eps = section.get("eval_epsilon", 0.0)
+        if not isinstance(eps, (int, float)) or isinstance(eps, bool) or not 0 <= eps <= 1:
+            raise _fail(params, f"{key}.eval_epsilon must be a number in [0, 1], got {eps!r}")
+        extra = {"eval_epsilon": float(eps)}
+    known = ({f.name for f in dataclasses.fields(net_cls)} | {f.name for f in dataclasses.fields(train_cls)}
+             | {"behaviours", "env_steps", "eval_epsilon"}) - set(grid) - {"cell", "hierarchical", "seed", "device"}
+    unknown = sorted(set(section) - known)
+    if unknown:
+        raise _fail(params, f"{key}: unknown keys {unknown}; expected some of {sorted(known)}")
+    return {"method": method, "env": env, "model": _fill(params, key, net_cls, section, **net_fixed),
+            "train": _fill(params, key, train_cls, section, **train_fixed), **extra}
 
 
 def evaluate_settings(params: dict) -> dict:
@@ -187,12 +288,19 @@ def evaluate_settings(params: dict) -> dict:
     per_cell = _get(params, "logs.episodes_per_cell", int, 1)
     if not 0 <= per_cell <= episodes:
         raise _fail(params, f"logs.episodes_per_cell must be in 0..evaluate.episodes, got {per_cell}")
+    methods = _names(params, "evaluate.methods", EVAL_METHODS)
+    trained = set(_get(params, "train.methods", list)) | {m for v in baseline_lists(params).values() for m in v}
+    untrained = [m for m in methods if METHODS[m].training != "none" and m not in trained]
+    if untrained:
+        raise _fail(params, f"evaluate.methods: {untrained} are never trained (add them to train.methods, "
+                    "baselines.offline or baselines.online)")
     return {
-        "methods": _names(params, "evaluate.methods", EVAL_METHODS),
+        "methods": methods,
         "envs": _get(params, "train.envs", list), "seeds": _int_list(params, "train.seeds"),
         "fail_probs": fail_probs(params, "evaluate.fail_probs"), "episodes": episodes,
         "device": _get(params, "evaluate.device", str, "cpu"), "log_episodes": per_cell,
         "datasets": "data/datasets", "train_behaviours": train_settings(params)["behaviours"]["hnsdt"],
+        "eval_epsilon": {m: _get(params, f"baselines.{m}.eval_epsilon", float, 0.0) for m in ONLINE_BASELINES},
     }
 
 

@@ -1,7 +1,7 @@
-"""DVC stage `train@ENV-METHOD`: one decision transformer per seed for a learned method on one environment.
+"""DVC stages `train`, `train_offline` and `train_online`: one learned method on one env with one seed.
 
-Usage: python pipeline/train.py ENV METHOD   (METHOD: hnsdt or pure_dt)
-Writes models/ENV/METHOD/seed{k}/{model.safetensors,config.json} and plots/train/ENV-METHOD.csv.
+Usage: python pipeline/train.py ENV METHOD SEED
+Writes models/ENV/METHOD/seedSEED/{model.safetensors,config.json} and plots/train/ENV-METHOD-seedSEED.csv.
 """
 
 import sys
@@ -13,6 +13,6 @@ ensure_deterministic_hashing()
 from hnsdt.cli import main  # noqa: E402
 
 if __name__ == "__main__":
-    if len(sys.argv) != 3:
-        sys.exit("usage: python pipeline/train.py ENV METHOD")
-    sys.exit(main(["train", "--env", sys.argv[1], "--method", sys.argv[2]]))
+    if len(sys.argv) != 4:
+        sys.exit("usage: python pipeline/train.py ENV METHOD SEED")
+    sys.exit(main(["train", "--env", sys.argv[1], "--method", sys.argv[2], "--seed", sys.argv[3]]))

@@ -15,6 +15,8 @@ from conftest import REPO
 
 pytestmark = pytest.mark.slow
 BIN = Path(sys.executable).parent
+STAGES = {"hnsdt": "train", "pure_dt": "train", "lstm_hier": "train_offline", "gru": "train_offline",
+          "dqn": "train_online", "options": "train_online"}  # learned method -> its DVC stage
 
 
 def _copy_repo(dst: Path) -> None:
@@ -32,7 +34,11 @@ def _tiny_params(path: Path) -> None:
     params["collect"]["fail_probs"] = [0.1]
     for b in params["collect"]["behaviours"]:
         b["episodes"] = 3
-    params["train"].update(seeds=[0], workers=1, epochs=1, max_steps=3)
+    params["train"].update(seeds=[0], epochs=1, max_steps=3)
+    for method in params["baselines"]["offline"]:
+        params["baselines"][method].update(epochs=1, max_steps=2)
+    for method in params["baselines"]["online"]:
+        params["baselines"][method].update(env_steps=400, learning_starts=200)
     params["evaluate"].update(episodes=4, fail_probs=[0.0, 0.2])
     path.write_text(yaml.safe_dump(params, sort_keys=False))
 
@@ -73,34 +79,43 @@ def test_repro_runs_everything_then_nothing_then_only_what_changed(repo_copy):
     from hnsdt.data.lerobot_io import open_dataset
 
     ran = _ran(_run(["dvc", "repro"], repo_copy))
-    assert ran == {"collect@keydoor", "collect@multikeydoor", "train@keydoor-hnsdt", "train@keydoor-pure_dt",
-                   "train@multikeydoor-hnsdt", "train@multikeydoor-pure_dt", "evaluate", "report"}
+    assert ran == {"collect@keydoor", "collect@multikeydoor", "evaluate", "report"} | {
+        f"{STAGES[m]}@{env}-{m}-0" for env in ("keydoor", "multikeydoor") for m in STAGES}
     for env in ("keydoor", "multikeydoor"):
         assert open_dataset(repo_copy / "data/datasets" / env).meta.total_episodes == 9
-        for method in ("hnsdt", "pure_dt"):
+        for method in STAGES:
             assert (repo_copy / f"models/{env}/{method}/seed0/model.safetensors").is_file()
-            assert (repo_copy / f"plots/train/{env}-{method}.csv").is_file()
+            assert (repo_copy / f"plots/train/{env}-{method}-seed0.csv").is_file()
     table = pd.read_csv(repo_copy / "results/episodes.csv", keep_default_na=False)
-    assert len(table) == 3 * 2 * 2 * 1 * 4  # methods x envs x fail_probs x seeds x episodes
+    assert len(table) == 7 * 2 * 2 * 1 * 4  # methods x envs x fail_probs x seeds x episodes
     metrics = json.loads((repo_copy / "results/metrics.json").read_text())
     assert metrics["keydoor"]["symbolic"]["fail_0"]["success_mean"] == 1.0
+    assert set(metrics["multikeydoor"]) == set(STAGES) | {"symbolic"}
+    usage = pd.read_csv(repo_copy / "results/training_usage.csv")
+    assert set(usage[usage.training == "online"].env_steps) == {400}
+    assert (usage[usage.training == "dataset"].dataset_frames > 0).all()
     recorded = table[table.rrd != ""]
-    assert len(recorded) == 3 * 2 * 2 and all((repo_copy / p).is_file() for p in recorded.mcap)
+    assert len(recorded) == 7 * 2 * 2 and all((repo_copy / p).is_file() for p in recorded.mcap)
     report = (repo_copy / "report/report.md").read_text()
     lock = yaml.safe_load((repo_copy / "dvc.lock").read_text())
     dataset_md5 = lock["stages"]["collect@keydoor"]["outs"][0]["md5"]
     rev = _run(["git", "rev-parse", "--short=12", "HEAD"], repo_copy).strip()
     assert dataset_md5 in report and "figures/comparison.png" in report and f"`{rev}" in report
     assert (repo_copy / "report/figures/success_heatmap.png").stat().st_size > 10_000
+    assert "figures/paradigms.png" in report and "Agreement with the paper's claims" in report
 
     assert _ran(_run(["dvc", "repro"], repo_copy)) == set()  # nothing changed: nothing reruns
 
     _set(repo_copy, "evaluate", "episodes", 5)
     assert _ran(_run(["dvc", "repro"], repo_copy)) == {"evaluate", "report"}
 
-    _set(repo_copy, "envs.keydoor", "max_steps", 60)
+    _set(repo_copy, "baselines.dqn", "lr", 0.001)  # one method's knob: only its instances retrain
     assert _ran(_run(["dvc", "repro"], repo_copy)) == {
-        "collect@keydoor", "train@keydoor-hnsdt", "train@keydoor-pure_dt", "evaluate", "report"}
+        "train_online@keydoor-dqn-0", "train_online@multikeydoor-dqn-0", "evaluate", "report"}
+
+    _set(repo_copy, "envs.keydoor", "max_steps", 60)
+    assert _ran(_run(["dvc", "repro"], repo_copy)) == {"collect@keydoor", "evaluate", "report"} | {
+        f"{STAGES[m]}@keydoor-{m}-0" for m in STAGES}
 
 
 def test_replay_points_to_an_evaluated_episode(repo_copy):

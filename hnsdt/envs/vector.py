@@ -27,14 +27,17 @@ _DELTAS = np.array(MOVES + ((0, 0),), dtype=np.int64)  # pick/open does not move
 class KeyDoorVectorEnv(VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.DISABLED}
 
-    def __init__(self, num_envs: int, layout: str | Layout = "keydoor_5x5", fail_prob: float = 0.0,
+    def __init__(self, num_envs: int, layout: str | Layout = "keydoor_5x5", fail_prob: float | Any = 0.0,
                  max_steps: int = 100, **_ignored: Any):
-        check_env_params(fail_prob, max_steps)
+        """``fail_prob`` is one probability for every copy, or one per copy (online learners train on a mix)."""
         if int(num_envs) < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        per_copy = np.broadcast_to(np.asarray(fail_prob, dtype=np.float64), (int(num_envs),))
+        for p in np.unique(per_copy):
+            check_env_params(p, max_steps)
         self.layout = lay = load_layout(layout)
         self.num_envs = int(num_envs)
-        self.fail_prob = float(fail_prob)
+        self.fail_prob = float(per_copy[0]) if np.ndim(fail_prob) == 0 else per_copy.copy()
         self.max_steps = int(max_steps)
         self.single_observation_space = observation_space_for(lay)
         self.single_action_space = gym.spaces.Discrete(N_ACTIONS)

@@ -18,8 +18,9 @@ from hnsdt.agents.symbolic import SymbolicAgent
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv
 
-METHODS = ("hnsdt", "pure_dt", "symbolic")
-LEARNED = {"hnsdt": "subgoal", "pure_dt": "return"}  # method -> DT conditioning
+from hnsdt.methods import METHODS, method as lookup_method
+
+LEARNED = {"hnsdt": "subgoal", "pure_dt": "return"}  # decision transformer -> its conditioning
 
 
 @dataclass
@@ -42,18 +43,41 @@ def checkpoint_dir(models_root: str | Path, env: str, method: str, seed: int) ->
 
 
 def make_agent(method: str, layout: Layout, executor: ExecutorConfig, models_root: str | Path, env: str,
-               seed: int, device: str = "cpu"):
-    if method == "symbolic":
+               seed: int, device: str = "cpu", epsilon: float = 0.0, agent_seed: int = 0):
+    """The batched agent of ``method`` for one env and training seed, loaded from its checkpoint.
+    ``epsilon`` and ``agent_seed`` only matter to the online baselines (ε-greedy noise, sampled options)."""
+    if lookup_method(method).training == "none":
         return SymbolicAgent(layout, executor)
-    if method not in LEARNED:
-        raise ValueError(f"unknown method {method!r}; expected one of {METHODS}")
-    from hnsdt.agents.dt_agents import HNSDTAgent, PureDTAgent
-    from hnsdt.models.train import load_checkpoint
+    from hnsdt.models.checkpoint import load_checkpoint
 
     model, meta = load_checkpoint(checkpoint_dir(models_root, env, method, seed), device)
+    if meta.get("method", method) != method:
+        raise ValueError(f"{checkpoint_dir(models_root, env, method, seed)} holds a {meta['method']} model")
     if method == "hnsdt":
+        from hnsdt.agents.dt_agents import HNSDTAgent
         return HNSDTAgent(layout, model, executor)
-    return PureDTAgent(model, meta["target_return"])
+    if method == "pure_dt":
+        from hnsdt.agents.dt_agents import PureDTAgent
+        return PureDTAgent(model, meta["target_return"])
+    if method in ("lstm_hier", "gru"):
+        from hnsdt.agents.baselines.recurrent import RecurrentAgent
+        return RecurrentAgent(model)
+    if method == "dqn":
+        from hnsdt.agents.baselines.dqn import DQNAgent
+        return DQNAgent(model, epsilon, agent_seed)
+    from hnsdt.agents.baselines.options import OptionsAgent
+    return OptionsAgent(model, epsilon, agent_seed)
+
+
+def training_usage(models_root: str | Path, env: str, method: str, seed: int) -> dict:
+    """What a learned model was trained on, from its checkpoint: env steps (online) or dataset frames."""
+    import json
+
+    meta = json.loads((checkpoint_dir(models_root, env, method, seed) / "config.json").read_text())
+    usage = meta.get("usage", {})
+    return {"method": method, "env": env, "seed": seed, "training": lookup_method(method).training,
+            "env_steps": usage.get("env_steps"), "dataset_frames": usage.get("dataset_frames"),
+            "gradient_steps": usage.get("gradient_steps")}
 
 
 def cell_seed(cell: Cell, fail_index: int) -> int:
@@ -194,15 +218,18 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
     navigators = {e: Navigator(envs[e]["layout"]) for e in settings["envs"]}
     with atomic_dir(out) as tmp:
         tmp.mkdir()
-        rows, seg_rows, params_count = [], [], {}
+        rows, seg_rows, params_count, usage = [], [], {}, []
         cells = [(m, e, fi, f, s) for m in settings["methods"] for e in settings["envs"]
                  for fi, f in enumerate(settings["fail_probs"]) for s in settings["seeds"]]
         for method, env, fi, fail_prob, seed in tqdm(cells, desc="evaluate", unit="cell", disable=not progress):
             cell = Cell(method, env, fail_prob, seed)
             lay, max_steps = envs[env]["layout"], envs[env]["max_steps"]
-            agent = make_agent(method, lay, executor, models_root, env, seed, settings["device"])
+            agent = make_agent(method, lay, executor, models_root, env, seed, settings["device"],
+                               settings.get("eval_epsilon", {}).get(method, 0.0), cell_seed(cell, fi) + 1)
             if hasattr(agent, "model"):
                 params_count[f"{env}/{method}"] = sum(p.numel() for p in agent.model.parameters())
+                if fi == 0:
+                    usage.append(training_usage(models_root, env, method, seed))
             episodes = run_cell(cell, fi, lay, max_steps, settings["episodes"], agent)
             cell_rows = episode_rows(cell, episodes, lay, executor.plan_mode)
             seg_rows += segment_rows(cell, episodes, navigators[env])
@@ -226,6 +253,10 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
             Path(settings["datasets"]) / e, e, settings["train_behaviours"])]
         pd.DataFrame(counts, columns=["env", "operator", "segments"]).to_csv(tmp / "training_segments.csv",
                                                                            index=False)
+        pd.DataFrame(usage, columns=["method", "env", "seed", "training", "env_steps", "dataset_frames",
+                                     "gradient_steps"]).astype({"env_steps": "Int64", "dataset_frames": "Int64",
+                                                                "gradient_steps": "Int64"}).to_csv(
+            tmp / "training_usage.csv", index=False)
         (tmp / "model_parameters.json").write_text(json.dumps(params_count, indent=2, sort_keys=True) + "\n")
         summ = add_optimum(summary(table), envs)
         summ.to_csv(tmp / "summary.csv", index=False, float_format="%.6g")

@@ -63,6 +63,8 @@ class DTConfig:
 
 
 class DecisionTransformer(nn.Module):
+    arch = "decision_transformer"
+
     def __init__(self, cfg: DTConfig):
         super().__init__()
         self.cfg = cfg

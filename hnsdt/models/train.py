@@ -1,23 +1,19 @@
 """Offline training of a decision transformer on a LeRobot dataset, and its checkpoints.
 
 Adam, batch of windows, a fixed number of epochs over the training windows; CUDA when available, CPU
-otherwise. Same seed on CPU ⇒ same weights. A checkpoint is a folder with ``model.safetensors`` (weights) and
-``config.json`` (the :class:`DTConfig` and training facts).
+otherwise. Same seed on CPU ⇒ same weights. Checkpoints: :mod:`hnsdt.models.checkpoint`.
 """
 
 from __future__ import annotations
 
-import json
-from dataclasses import asdict, dataclass
-from pathlib import Path
+from dataclasses import dataclass
 
 import numpy as np
 import torch
-from safetensors.torch import load_file, save_file
 from tqdm import tqdm
 
 from hnsdt.data.windows import Frames, make_windows, window_ends
-from hnsdt.fileio import atomic_dir
+from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint  # noqa: F401  (re-exported)
 from hnsdt.models.dt import DecisionTransformer, DTConfig
 
 
@@ -95,52 +91,3 @@ def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bo
     bar.close()
     model.eval()
     return model, curve
-
-
-def save_checkpoint(model: DecisionTransformer, out_dir: str | Path, extra: dict | None = None) -> Path:
-    """Write ``model.safetensors`` and ``config.json`` into ``out_dir`` atomically (temp folder, rename)."""
-    out = Path(out_dir)
-    with atomic_dir(out) as tmp:
-        tmp.mkdir()
-        state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
-        save_file(state, str(tmp / "model.safetensors"))
-        meta = {"model": model.cfg.to_dict(), **(extra or {})}
-        (tmp / "config.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
-    return out
-
-
-def load_checkpoint(path: str | Path, device: str = "cpu") -> tuple[DecisionTransformer, dict]:
-    path = Path(path)
-    for name in ("model.safetensors", "config.json"):
-        if not (path / name).is_file():
-            raise FileNotFoundError(f"checkpoint {path}: missing {name} (run `dvc repro train`)")
-    meta = json.loads((path / "config.json").read_text())
-    model = DecisionTransformer(DTConfig(**meta["model"]))
-    model.load_state_dict(load_file(str(path / "model.safetensors"), device=device))
-    model.to(device).eval()
-    return model, meta
-
-
-
-def _train_one(args) -> tuple[int, list[dict]]:
-    frames, model_cfg, cfg, out_dir, extra, position = args
-    torch.set_num_threads(cfg.threads or 1)
-    model, curve = train_dt(frames, model_cfg, cfg, progress=True, desc=f"seed {cfg.seed}")
-    save_checkpoint(model, out_dir, {**extra, "train": asdict(cfg), "curve": curve})
-    return cfg.seed, curve
-
-
-def train_seeds(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, seeds: list[int], out_root: str | Path,
-                workers: int = 1, extra: dict | None = None) -> dict[int, list[dict]]:
-    """Train one model per seed into ``out_root/seed{k}``; with ``workers > 1`` seeds run in parallel
-    processes of one torch thread each (two 1-thread processes beat one 2-thread process on 2 cores)."""
-    import concurrent.futures as cf
-    import multiprocessing as mp
-    from dataclasses import replace
-
-    jobs = [(frames, model_cfg, replace(cfg, seed=s, threads=cfg.threads or (1 if workers > 1 else 0)),
-             Path(out_root) / f"seed{s}", dict(extra or {}), i) for i, s in enumerate(seeds)]
-    if workers <= 1:
-        return dict(_train_one(j) for j in jobs)
-    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
-        return dict(pool.map(_train_one, jobs))

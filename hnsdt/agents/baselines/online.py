@@ -1,0 +1,123 @@
+"""What the online learners share: the training environment, a replay buffer, the ε schedule and the
+per-episode statistics of the training curve."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from hnsdt.envs.layout import Layout
+from hnsdt.envs.vector import KeyDoorVectorEnv
+
+
+@dataclass
+class OnlineConfig:
+    """Knobs every online learner has; each learner's config adds its own."""
+
+    env_steps: int = 50_000  # environment steps to train for (summed over the parallel copies)
+    num_envs: int = 8  # environment copies stepped together
+    fail_probs: tuple[float, ...] = (0.0, 0.1, 0.2, 0.3)  # the copies cycle through these
+    lr: float = 5e-4  # Adam learning rate
+    gamma: float = 0.99  # discount
+    buffer_size: int = 50_000  # replay capacity, in transitions
+    batch_size: int = 128  # replayed transitions per gradient step
+    learning_starts: int = 2_000  # env steps of exploration before learning from replay
+    target_period: int = 250  # gradient steps between target-network copies
+    epsilon_start: float = 1.0  # exploration ε at the start ...
+    epsilon_end: float = 0.05  # ... decays linearly to this ...
+    exploration_fraction: float = 0.5  # ... over this fraction of env_steps
+    seed: int = 0
+    device: str = "cpu"
+    log_every: int = 2_000  # env steps between training-curve rows
+
+
+def training_env(layout: Layout, max_steps: int, num_envs: int, fail_probs) -> KeyDoorVectorEnv:
+    """``num_envs`` copies whose failure probabilities cycle through ``fail_probs``, so one policy learns
+    the same mix of failure probabilities the offline methods see in the dataset."""
+    per_copy = np.resize(np.asarray(fail_probs, dtype=np.float64), num_envs)
+    return KeyDoorVectorEnv(num_envs, layout, per_copy, max_steps)
+
+
+def linear_schedule(start: float, end: float, duration: int, t: int) -> float:
+    return end if duration <= 0 else max(end, start + (end - start) * t / duration)
+
+
+class ReplayBuffer:
+    """Uniform replay of (s, a, r, s', terminated) plus any extra integer column (the option, for
+    option-critic). Truncated episodes are stored as not terminated so their value is bootstrapped."""
+
+    def __init__(self, size: int, state_dim: int, rng: np.random.Generator):
+        self.size, self.rng, self.n, self.pos = size, rng, 0, 0
+        self.obs = np.zeros((size, state_dim), np.int64)
+        self.next_obs = np.zeros((size, state_dim), np.int64)
+        self.actions = np.zeros(size, np.int64)
+        self.options = np.zeros(size, np.int64)
+        self.rewards = np.zeros(size, np.float32)
+        self.terminated = np.zeros(size, np.float32)
+
+    def add(self, obs, actions, rewards, next_obs, terminated, options=None) -> None:
+        k = len(obs)
+        idx = (self.pos + np.arange(k)) % self.size
+        self.obs[idx], self.actions[idx], self.rewards[idx] = obs, actions, rewards
+        self.next_obs[idx], self.terminated[idx] = next_obs, terminated
+        if options is not None:
+            self.options[idx] = options
+        self.pos = int((self.pos + k) % self.size)
+        self.n = min(self.n + k, self.size)
+
+    def sample(self, batch_size: int) -> dict[str, np.ndarray]:
+        idx = self.rng.integers(0, self.n, batch_size)
+        return {"obs": self.obs[idx], "actions": self.actions[idx], "rewards": self.rewards[idx],
+                "next_obs": self.next_obs[idx], "terminated": self.terminated[idx], "options": self.options[idx]}
+
+
+class EpisodeStats:
+    """Running return, length and success of each copy; the finished episodes since the last curve row."""
+
+    def __init__(self, n: int):
+        self.ret = np.zeros(n)
+        self.length = np.zeros(n, np.int64)
+        self.finished: list[tuple[float, int, bool]] = []
+        self.episodes = 0
+
+    def update(self, rewards, terminated, done) -> None:
+        self.ret += rewards
+        self.length += 1
+        for i in np.flatnonzero(done):
+            self.finished.append((float(self.ret[i]), int(self.length[i]), bool(terminated[i])))
+        self.episodes += int(done.sum())
+        self.ret[done], self.length[done] = 0.0, 0
+
+    def row(self) -> dict:
+        """Mean return / success / length of the episodes finished since the previous row (NaN if none)."""
+        f, self.finished = self.finished, []
+        if not f:
+            return {"episodes": self.episodes, "return": float("nan"), "success": float("nan"),
+                    "length": float("nan")}
+        r, n, s = zip(*f)
+        return {"episodes": self.episodes, "return": float(np.mean(r)), "success": float(np.mean(s)),
+                "length": float(np.mean(n))}
+
+
+class OnlineAgent:
+    """Batched acting with a trained online learner: ``epsilon`` and a seeded generator for its randomness.
+    Subclasses implement ``act``; ``reset`` starts a new batch of episodes."""
+
+    def __init__(self, model: torch.nn.Module, epsilon: float = 0.0, seed: int = 0):
+        self.model, self.epsilon = model, float(epsilon)
+        self.rng = np.random.default_rng(seed)
+        self.device = next(model.parameters()).device
+
+    def states(self, obs: np.ndarray) -> torch.Tensor:
+        return torch.from_numpy(np.asarray(obs, np.int64)).to(self.device)
+
+    def reset(self, obs: np.ndarray) -> None:
+        pass
+
+    def observe(self, obs, active, actions=None, rewards=None) -> None:
+        pass
+
+    def finish(self) -> None:
+        pass

@@ -1,0 +1,126 @@
+"""RNN baselines, trained offline on whole episodes of the LeRobot dataset: ``lstm_hier`` (3 × 256 LSTM with a
+sub-goal head and a sub-goal-conditioned action head) and ``gru`` (2 × 128 GRU, plain behaviour cloning).
+
+Training: Adam on batches of whole episodes (padded to the longest in the batch, padding masked out of the
+loss), the episodes of the chosen collection behaviours only. Acting: greedy, one recurrent step per
+environment step, carrying the recurrent state through the episode.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from hnsdt.data.windows import Frames
+from hnsdt.models.recurrent import START_ACTION, RecurrentConfig, RecurrentPolicy
+
+
+@dataclass
+class RecurrentTrainConfig:
+    epochs: int = 20  # passes over the training episodes ...
+    max_steps: int = 0  # ... capped at this many gradient steps (0 = no cap)
+    batch_size: int = 16  # episodes per gradient step
+    lr: float = 1e-3
+    seed: int = 0
+    device: str = "cpu"
+    log_every: int = 10  # one training-curve row per this many steps
+    behaviours: tuple[str, ...] = ()  # collection behaviours to learn from (empty = all)
+
+
+def training_episodes(frames: Frames, behaviours=()) -> tuple[np.ndarray, np.ndarray]:
+    """First frame and length of every episode collected by one of ``behaviours`` (all when empty)."""
+    starts = np.unique(frames.episode_start)
+    lengths = np.diff(np.r_[starts, len(frames)])
+    if len(behaviours):
+        keep = np.isin(frames.policy[starts], list(behaviours))
+        starts, lengths = starts[keep], lengths[keep]
+    return starts, lengths
+
+
+def episode_batch(frames: Frames, starts: np.ndarray, lengths: np.ndarray) -> dict[str, np.ndarray]:
+    """Whole episodes, right-padded to the longest: states, previous actions, actions, sub-goals, mask."""
+    T = int(lengths.max())
+    t = np.arange(T)
+    mask = t[None, :] < lengths[:, None]
+    idx = np.where(mask, starts[:, None] + t[None, :], starts[:, None])
+    actions = frames.actions[idx]
+    prev = np.concatenate([np.full((len(starts), 1), START_ACTION), actions[:, :-1]], axis=1)
+    return {"states": frames.states[idx], "prev_actions": prev, "actions": actions,
+            "subgoals": frames.subgoals[idx], "mask": mask}
+
+
+def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTrainConfig, progress: bool = True,
+                    desc: str = "train") -> tuple[RecurrentPolicy, list[dict], dict]:
+    """Train from scratch; returns the model (eval mode), its curve and the data used."""
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    device = torch.device(cfg.device)
+    starts, lengths = training_episodes(frames, cfg.behaviours)
+    if len(starts) == 0:
+        raise ValueError(f"no training episodes from behaviours {list(cfg.behaviours) or 'any'} in the dataset")
+    model = RecurrentPolicy(model_cfg).to(device)
+    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
+    per_epoch = int(np.ceil(len(starts) / cfg.batch_size))
+    total = cfg.epochs * per_epoch if not cfg.max_steps else min(cfg.epochs * per_epoch, cfg.max_steps)
+    curve, recent, step, seen = [], [], 0, 0
+    model.train()
+    with tqdm(total=total, desc=desc, unit="step", disable=not progress) as bar:
+        while step < total:
+            order = rng.permutation(len(starts))
+            for b in range(per_epoch):
+                if step >= total:
+                    break
+                rows = order[b * cfg.batch_size:(b + 1) * cfg.batch_size]
+                batch = {k: torch.from_numpy(np.ascontiguousarray(v)).to(device)
+                         for k, v in episode_batch(frames, starts[rows], lengths[rows]).items()}
+                loss = model.loss(batch)
+                opt.zero_grad(set_to_none=True)
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
+                opt.step()
+                step += 1
+                seen += int(lengths[rows].sum())
+                recent.append(loss.item())
+                bar.update(1)
+                bar.set_postfix(loss=f"{recent[-1]:.4f}")
+                if step % cfg.log_every == 0 or step == total:
+                    curve.append({"step": step, "epoch": step / per_epoch, "frames_seen": seen,
+                                  "loss": float(np.mean(recent))})
+                    recent = []
+    model.eval()
+    usage = {"dataset_frames": int(lengths.sum()), "dataset_episodes": int(len(starts)), "frames_seen": seen,
+             "gradient_steps": step}
+    return model, curve, usage
+
+
+class RecurrentAgent:
+    """Greedy actions of a recurrent controller; the hierarchical one also reports its chosen sub-goals."""
+
+    def __init__(self, model: RecurrentPolicy):
+        self.model = model
+        self.name = "lstm_hier" if model.cfg.hierarchical else "gru"
+        self.device = next(model.parameters()).device
+
+    def reset(self, obs: np.ndarray) -> None:
+        self.hidden = None
+        self.prev = np.full(len(obs), START_ACTION, dtype=np.int64)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        states = torch.from_numpy(np.asarray(obs, np.int64)[:, None]).to(self.device)
+        prev = torch.from_numpy(self.prev[:, None]).to(self.device)
+        with torch.no_grad():
+            logits, sub_logits, self.hidden = self.model(states, prev, hidden=self.hidden)
+        if sub_logits is not None:
+            ids = sub_logits[:, -1].argmax(-1).cpu().numpy()
+            self.last_subgoals = (ids, np.full((len(ids), 2), -1, dtype=np.int64))
+        return logits[:, -1].argmax(-1).cpu().numpy()
+
+    def observe(self, obs, active, actions=None, rewards=None) -> None:
+        if actions is not None:
+            self.prev = np.where(active, np.asarray(actions, np.int64), self.prev)
+
+    def finish(self) -> None:
+        pass

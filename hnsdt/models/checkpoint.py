@@ -1,0 +1,51 @@
+"""Checkpoints of every learned model: a folder with ``model.safetensors`` (weights) and ``config.json``
+(``arch``, the model's config dataclass under ``model``, and training facts)."""
+
+from __future__ import annotations
+
+import importlib
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import torch
+from safetensors.torch import load_file, save_file
+
+from hnsdt.fileio import atomic_dir
+
+# arch name -> (module, config class, model class); imported on demand
+ARCHITECTURES = {
+    "decision_transformer": ("hnsdt.models.dt", "DTConfig", "DecisionTransformer"),
+    "recurrent": ("hnsdt.models.recurrent", "RecurrentConfig", "RecurrentPolicy"),
+    "q_network": ("hnsdt.models.qnetwork", "QNetworkConfig", "QNetwork"),
+    "option_critic": ("hnsdt.models.qnetwork", "OptionCriticConfig", "OptionCritic"),
+}
+
+
+def save_checkpoint(model: torch.nn.Module, out_dir: str | Path, extra: dict | None = None) -> Path:
+    """Write ``model.safetensors`` and ``config.json`` into ``out_dir`` atomically (temp folder, rename)."""
+    out = Path(out_dir)
+    with atomic_dir(out) as tmp:
+        tmp.mkdir()
+        state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
+        save_file(state, str(tmp / "model.safetensors"))
+        meta = {"arch": model.arch, "model": asdict(model.cfg), **(extra or {})}
+        (tmp / "config.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
+    return out
+
+
+def load_checkpoint(path: str | Path, device: str = "cpu") -> tuple[torch.nn.Module, dict]:
+    path = Path(path)
+    for name in ("model.safetensors", "config.json"):
+        if not (path / name).is_file():
+            raise FileNotFoundError(f"checkpoint {path}: missing {name} (run `dvc repro`)")
+    meta = json.loads((path / "config.json").read_text())
+    arch = meta.get("arch", "decision_transformer")
+    if arch not in ARCHITECTURES:
+        raise ValueError(f"checkpoint {path}: unknown arch {arch!r}")
+    module, cfg_cls, model_cls = ARCHITECTURES[arch]
+    mod = importlib.import_module(module)
+    model = getattr(mod, model_cls)(getattr(mod, cfg_cls)(**meta["model"]))
+    model.load_state_dict(load_file(str(path / "model.safetensors"), device=device))
+    model.to(device).eval()
+    return model, meta

@@ -1,0 +1,83 @@
+"""Value networks of the traditional-RL baselines: DQN's Q-network and the option-critic network.
+
+States are small integer vectors (row, col, flags), so both read a one-hot encoding of row and column next to
+the flags and pass it through an MLP of ``n_layers`` × ``hidden`` ReLU units.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+from hnsdt.models.dt import N_ACTIONS
+
+
+def encode_states(states: torch.Tensor, grid_h: int, grid_w: int) -> torch.Tensor:
+    """(…, 2 + flags) int64 → (…, grid_h + grid_w + flags) float: one-hot row, one-hot column, flags."""
+    return torch.cat([F.one_hot(states[..., 0], grid_h).float(), F.one_hot(states[..., 1], grid_w).float(),
+                      states[..., 2:].float()], dim=-1)
+
+
+def mlp(n_in: int, hidden: int, n_layers: int) -> nn.Sequential:
+    layers, width = [], n_in
+    for _ in range(n_layers):
+        layers += [nn.Linear(width, hidden), nn.ReLU()]
+        width = hidden
+    return nn.Sequential(*layers)
+
+
+@dataclass
+class QNetworkConfig:
+    n_flags: int
+    grid_h: int
+    grid_w: int
+    hidden: int = 128
+    n_layers: int = 2
+
+
+class QNetwork(nn.Module):
+    arch = "q_network"
+
+    def __init__(self, cfg: QNetworkConfig):
+        super().__init__()
+        self.cfg = cfg
+        self.body = mlp(cfg.grid_h + cfg.grid_w + cfg.n_flags, cfg.hidden, cfg.n_layers)
+        self.head = nn.Linear(cfg.hidden, N_ACTIONS)
+
+    def forward(self, states: torch.Tensor) -> torch.Tensor:
+        """Q-values (B, 5)."""
+        return self.head(self.body(encode_states(states, self.cfg.grid_h, self.cfg.grid_w)))
+
+
+@dataclass
+class OptionCriticConfig:
+    n_flags: int
+    grid_h: int
+    grid_w: int
+    n_options: int = 8
+    hidden: int = 128
+    n_layers: int = 2
+
+
+class OptionCritic(nn.Module):
+    """Shared features; heads for Q_Ω(s, ω), the termination probabilities β_ω(s) and the intra-option
+    policies π_ω(a | s) of every option (Bacon et al., 2017)."""
+
+    arch = "option_critic"
+
+    def __init__(self, cfg: OptionCriticConfig):
+        super().__init__()
+        self.cfg = cfg
+        self.body = mlp(cfg.grid_h + cfg.grid_w + cfg.n_flags, cfg.hidden, cfg.n_layers)
+        self.q_head = nn.Linear(cfg.hidden, cfg.n_options)
+        self.termination_head = nn.Linear(cfg.hidden, cfg.n_options)
+        self.policy_head = nn.Linear(cfg.hidden, cfg.n_options * N_ACTIONS)
+
+    def forward(self, states: torch.Tensor):
+        """Q_Ω (B, K), β (B, K) in (0, 1), policy logits (B, K, 5)."""
+        x = self.body(encode_states(states, self.cfg.grid_h, self.cfg.grid_w))
+        logits = self.policy_head(x).view(-1, self.cfg.n_options, N_ACTIONS)
+        return self.q_head(x), torch.sigmoid(self.termination_head(x)), logits

@@ -1,0 +1,90 @@
+"""Recurrent controllers of the RNN baselines (paper, Section 5): the LSTM hierarchical controller (3 × 256) and
+the GRU sequential controller (2 × 128).
+
+Each step's input is the state (row and column embeddings plus a linear map of the flags) plus the embedding of
+the previous action (a start token at t = 0). The flat controller reads an action from the recurrent state.
+The hierarchical one has two heads: a high-level head predicts the current sub-goal id (ψ's vocabulary) from
+the history, and a low-level head predicts the action from the history and that sub-goal's embedding. Training
+feeds the labelled sub-goal (teacher forcing); acting feeds the high-level head's own choice, so no planner is
+needed at test time.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+from hnsdt.models.dt import N_ACTIONS
+from hnsdt.symbolic.subgoals import VOCAB_SIZE
+
+CELLS = ("lstm", "gru")
+START_ACTION = N_ACTIONS  # the "previous action" of an episode's first step
+
+
+@dataclass
+class RecurrentConfig:
+    cell: str  # "lstm" or "gru"
+    n_flags: int
+    grid_h: int
+    grid_w: int
+    n_layers: int = 2
+    hidden: int = 128
+    hierarchical: bool = False  # sub-goal head + sub-goal-conditioned action head
+    embed: int = 64
+    dropout: float = 0.0
+
+    def __post_init__(self):
+        if self.cell not in CELLS:
+            raise ValueError(f"cell must be one of {CELLS}, got {self.cell!r}")
+        if min(self.n_layers, self.hidden, self.embed) < 1:
+            raise ValueError("n_layers, hidden and embed must be positive")
+
+
+class RecurrentPolicy(nn.Module):
+    arch = "recurrent"
+
+    def __init__(self, cfg: RecurrentConfig):
+        super().__init__()
+        self.cfg = cfg
+        d, h = cfg.embed, cfg.hidden
+        self.row_emb = nn.Embedding(cfg.grid_h, d)
+        self.col_emb = nn.Embedding(cfg.grid_w, d)
+        self.flag_proj = nn.Linear(max(cfg.n_flags, 1), d, bias=False)
+        self.prev_action_emb = nn.Embedding(N_ACTIONS + 1, d)
+        rnn = nn.LSTM if cfg.cell == "lstm" else nn.GRU
+        self.rnn = rnn(d, h, cfg.n_layers, batch_first=True, dropout=cfg.dropout if cfg.n_layers > 1 else 0.0)
+        if cfg.hierarchical:
+            self.subgoal_head = nn.Linear(h, VOCAB_SIZE)
+            self.subgoal_emb = nn.Embedding(VOCAB_SIZE, h)
+            self.action_head = nn.Sequential(nn.Linear(2 * h, h), nn.ReLU(), nn.Linear(h, N_ACTIONS))
+        else:
+            self.action_head = nn.Linear(h, N_ACTIONS)
+
+    def forward(self, states, prev_actions, subgoals=None, hidden=None):
+        """states (B, T, d) int64, prev_actions (B, T) int64; ``subgoals`` (B, T) feeds the hierarchical action
+        head (None: its own argmax). Returns action logits (B, T, 5), sub-goal logits (B, T, V) or None, and
+        the recurrent state to continue from."""
+        flags = states[..., 2:].float() if self.cfg.n_flags else states[..., :1].float() * 0
+        x = (self.row_emb(states[..., 0]) + self.col_emb(states[..., 1]) + self.flag_proj(flags)
+             + self.prev_action_emb(prev_actions))
+        out, hidden = self.rnn(x, hidden)
+        if not self.cfg.hierarchical:
+            return self.action_head(out), None, hidden
+        subgoal_logits = self.subgoal_head(out)
+        if subgoals is None:
+            subgoals = subgoal_logits.argmax(-1)
+        actions = self.action_head(torch.cat([out, self.subgoal_emb(subgoals)], dim=-1))
+        return actions, subgoal_logits, hidden
+
+    def loss(self, batch: dict) -> torch.Tensor:
+        """Masked cross-entropy of the actions, plus that of the sub-goals for the hierarchical controller."""
+        mask = batch["mask"].reshape(-1).float()
+        logits, sub_logits, _ = self(batch["states"], batch["prev_actions"], batch.get("subgoals"))
+        nll = F.cross_entropy(logits.reshape(-1, N_ACTIONS), batch["actions"].reshape(-1), reduction="none")
+        if sub_logits is not None:
+            nll = nll + F.cross_entropy(sub_logits.reshape(-1, VOCAB_SIZE), batch["subgoals"].reshape(-1),
+                                        reduction="none")
+        return (nll * mask).sum() / mask.sum().clamp(min=1.0)

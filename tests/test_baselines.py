@@ -1,0 +1,147 @@
+"""The four learned baselines: sizes as in the paper, real learning on Case 1, determinism, params errors."""
+
+import copy
+
+import numpy as np
+import pytest
+import torch
+
+from hnsdt.agents import SymbolicAgent, rollout
+from hnsdt.agents.baselines.dqn import DQNAgent, DQNConfig, train_dqn
+from hnsdt.agents.baselines.options import OptionsAgent, train_options
+from hnsdt.agents.baselines.recurrent import RecurrentAgent, RecurrentTrainConfig, episode_batch, train_recurrent
+from hnsdt.agents.rollout import RandomAgent
+from hnsdt.config import ParamsError, baseline_settings, evaluate_settings, load_params
+from hnsdt.data.windows import frames_from_arrays
+from hnsdt.envs import KeyDoorVectorEnv
+from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint
+from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig, QNetwork, QNetworkConfig
+from hnsdt.models.recurrent import RecurrentConfig, RecurrentPolicy
+
+from conftest import REPO
+
+
+@pytest.fixture(scope="module")
+def params():
+    return load_params(f"{REPO}/params.yaml")
+
+
+def _success(layout, agent, fail_prob=0.0, n=200, seed=11):
+    eps = rollout(KeyDoorVectorEnv(n, layout, fail_prob, 100), agent, seed=seed)
+    return float(np.mean([e.success for e in eps]))
+
+
+@pytest.fixture(scope="module")
+def random_success(keydoor):
+    """The bar every baseline must clear: uniform random actions on Case 1 at fail_prob 0 (about 0.03)."""
+    return _success(keydoor, RandomAgent(0))
+
+
+def _expert_frames(layout, n=48, fail_prob=0.1, seed=0):
+    eps = rollout(KeyDoorVectorEnv(n, layout, fail_prob, 100), SymbolicAgent(layout), seed=seed)
+    cat = lambda f: np.concatenate([f(i, e) for i, e in enumerate(eps)])  # noqa: E731
+    return frames_from_arrays(cat(lambda i, e: e.states[:-1]), cat(lambda i, e: e.actions),
+                              cat(lambda i, e: e.rewards), cat(lambda i, e: e.subgoal_ids),
+                              cat(lambda i, e: e.subgoal_targets), cat(lambda i, e: np.full(e.length, i)),
+                              cat(lambda i, e: np.arange(e.length)))
+
+
+def test_default_sizes_match_the_paper(params):
+    lstm = RecurrentPolicy(baseline_settings(params, "lstm_hier", "keydoor", 0)["model"])
+    assert isinstance(lstm.rnn, torch.nn.LSTM) and (lstm.rnn.num_layers, lstm.rnn.hidden_size) == (3, 256)
+    assert lstm.cfg.hierarchical and lstm.subgoal_head.out_features > 1  # high-level head over sub-goal ids
+    gru = RecurrentPolicy(baseline_settings(params, "gru", "keydoor", 0)["model"])
+    assert isinstance(gru.rnn, torch.nn.GRU) and (gru.rnn.num_layers, gru.rnn.hidden_size) == (2, 128)
+    assert not gru.cfg.hierarchical and not hasattr(gru, "subgoal_head")
+    oc = OptionCritic(baseline_settings(params, "options", "keydoor", 0)["model"])
+    assert oc.q_head.out_features == oc.termination_head.out_features == 8
+    assert oc.policy_head.out_features == 8 * 5
+    dqn = baseline_settings(params, "dqn", "multikeydoor", 0)
+    assert dqn["train"].buffer_size > 0 and dqn["train"].target_period > 0
+    assert dqn["train"].env_steps == params["baselines"]["dqn"]["env_steps"]["multikeydoor"]
+
+
+def test_recurrent_agent_step_by_step_equals_the_training_forward(keydoor):
+    """What the agent computes one step at a time is the training forward pass over the whole episode."""
+    frames = _expert_frames(keydoor, n=1)
+    model = RecurrentPolicy(RecurrentConfig("lstm", keydoor.n_flags, *keydoor.shape, n_layers=2, hidden=32,
+                                            hierarchical=True)).eval()
+    batch = episode_batch(frames, np.array([0]), np.array([len(frames)]))
+    with torch.no_grad():
+        full, full_sub, _ = model(torch.from_numpy(batch["states"]), torch.from_numpy(batch["prev_actions"]))
+    agent = RecurrentAgent(model)
+    agent.reset(frames.states[:1])
+    for t in range(len(frames)):
+        a = agent.act(frames.states[t : t + 1])
+        assert a[0] == full[0, t].argmax().item()
+        assert agent.last_subgoals[0][0] == full_sub[0, t].argmax().item()
+        agent.observe(frames.states[t : t + 1], np.array([True]), frames.actions[t : t + 1])
+
+
+@pytest.mark.parametrize("method", ["lstm_hier", "gru"])
+def test_recurrent_baselines_learn_case1(keydoor, params, random_success, method):
+    settings = baseline_settings(params, method, "keydoor", 0)
+    cfg = RecurrentTrainConfig(epochs=40, batch_size=16, lr=2e-3, seed=0)
+    model, curve, usage = train_recurrent(_expert_frames(keydoor), settings["model"], cfg, progress=False)
+    assert curve[-1]["loss"] < curve[0]["loss"]
+    assert usage["dataset_episodes"] == 48 and usage["dataset_frames"] > 48 * 13
+    success = _success(keydoor, RecurrentAgent(model))
+    assert success >= 0.9 > random_success + 0.5
+
+
+def test_dqn_learns_case1(keydoor, params, random_success):
+    """The default Case 1 configuration (params.yaml), evaluated at fail_prob 0."""
+    settings = baseline_settings(params, "dqn", "keydoor", 0)
+    model, curve, usage = train_dqn(keydoor, 100, settings["model"], settings["train"], progress=False)
+    assert usage["env_steps"] == settings["train"].env_steps and usage["gradient_steps"] > 3000
+    assert curve[-1]["success"] > curve[0]["success"]
+    assert _success(keydoor, DQNAgent(model)) >= 0.9 > random_success + 0.5
+
+
+def test_options_learns_case1(keydoor, params, random_success):
+    """The default Case 1 configuration (params.yaml), evaluated at fail_prob 0."""
+    settings = baseline_settings(params, "options", "keydoor", 0)
+    model, curve, usage = train_options(keydoor, 100, settings["model"], settings["train"], progress=False)
+    assert usage["env_steps"] == settings["train"].env_steps
+    assert _success(keydoor, OptionsAgent(model, seed=0)) > random_success + 0.1
+
+
+def test_online_training_is_seeded_and_checkpoints_round_trip(tmp_path, keydoor):
+    net = QNetworkConfig(keydoor.n_flags, *keydoor.shape, hidden=32)
+    cfg = DQNConfig(env_steps=1600, learning_starts=400, seed=3)
+    a, curve_a, _ = train_dqn(keydoor, 100, net, cfg, progress=False)
+    b, curve_b, _ = train_dqn(keydoor, 100, net, copy.deepcopy(cfg), progress=False)
+    assert all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values()))
+    assert curve_a == curve_b or np.allclose([r["loss"] for r in curve_a], [r["loss"] for r in curve_b])
+    save_checkpoint(a, tmp_path / "dqn", {"method": "dqn"})
+    c, meta = load_checkpoint(tmp_path / "dqn")
+    assert isinstance(c, QNetwork) and meta["arch"] == "q_network"
+    assert all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), c.state_dict().values()))
+    oc = OptionCritic(OptionCriticConfig(keydoor.n_flags, *keydoor.shape, hidden=16))
+    save_checkpoint(oc, tmp_path / "oc")
+    assert isinstance(load_checkpoint(tmp_path / "oc")[0], OptionCritic)
+
+
+def test_options_agent_is_reproducible_with_its_seed(keydoor):
+    model = OptionCritic(OptionCriticConfig(keydoor.n_flags, *keydoor.shape, hidden=16)).eval()
+    runs = [rollout(KeyDoorVectorEnv(8, keydoor, 0.2, 30), OptionsAgent(model, 0.1, seed=5), seed=2)
+            for _ in range(2)]
+    assert all(np.array_equal(x.actions, y.actions) for x, y in zip(*runs))
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda p: p["baselines"]["dqn"].update(learning_rate=0.1), "baselines.dqn: unknown keys ['learning_rate']"),
+    (lambda p: p["baselines"]["dqn"].update(env_steps={"keydoor": 10}), "baselines.dqn.env_steps"),
+    (lambda p: p["baselines"]["gru"].update(hidden="big"), "baselines.gru.hidden must be int"),
+    (lambda p: p["baselines"]["options"].update(fail_probs=[2]), "baselines.options.fail_probs"),
+    (lambda p: p["baselines"].update(online=["dqn", "ppo"]), "baselines.online: unknown name(s) ['ppo']"),
+    (lambda p: p["baselines"].update(online=["dqn"]), "['options'] are never trained"),
+])
+def test_bad_baseline_params_give_one_clear_error(params, edit, message):
+    p = copy.deepcopy(params)
+    edit(p)
+    with pytest.raises(ParamsError, match=None) as err:
+        for method in ("dqn", "gru", "options"):
+            baseline_settings(p, method, "multikeydoor", 0)
+        evaluate_settings(p)
+    assert message in str(err.value)
