@@ -5,9 +5,9 @@ Usage: python pipeline/evaluate.py   (writes results/)
 
 import sys
 
-from hnsdt.cli import ensure_deterministic_hashing
+from hnsdt.reproducible import pin_process
 
-ensure_deterministic_hashing()
+pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 
 from hnsdt.cli import main  # noqa: E402
 

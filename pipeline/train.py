@@ -6,9 +6,9 @@ Writes models/ENV/METHOD/seedSEED/{model.safetensors,config.json} and plots/trai
 
 import sys
 
-from hnsdt.cli import ensure_deterministic_hashing
+from hnsdt.reproducible import pin_process
 
-ensure_deterministic_hashing()
+pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 
 from hnsdt.cli import main  # noqa: E402
 

@@ -1,0 +1,88 @@
+"""Which CPU settings change the bytes of a trained model, and what pinning them costs.
+
+Usage: python benchmarks/cpu_determinism.py
+Each configuration runs in a fresh process: a decision transformer (L3, d128, context 10, batch 128) trained
+30 steps on a fixed random batch stream, and option-critic trained 6,000 env steps on Case 1. It prints the
+hash of each model's weights and the time per step. A row whose hash differs from the first row's shows a
+setting that a different machine (another ISA, another vendor's MKL path, another core count) would change;
+the last row is what ``hnsdt/reproducible.py`` pins.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+CHILD = r"""
+import hashlib, time
+import numpy as np, torch
+import hnsdt
+from hnsdt.envs import load_layout
+from hnsdt.agents.baselines.options import OptionsConfig, train_options
+from hnsdt.models.dt import DecisionTransformer, DTConfig
+from hnsdt.models.qnetwork import OptionCriticConfig
+
+def digest(model):
+    h = hashlib.sha256()
+    for v in model.state_dict().values():
+        h.update(v.detach().cpu().numpy().tobytes())
+    return h.hexdigest()[:12]
+
+torch.manual_seed(0)
+g = np.random.default_rng(0)
+dt = DecisionTransformer(DTConfig("subgoal", 1, 5, 5, context=10, n_layers=3))
+opt = torch.optim.Adam(dt.parameters(), 1e-3)
+B, T, steps = 128, 10, 30
+t = time.perf_counter()
+for _ in range(steps):
+    st = np.stack([g.integers(0, 5, (B, T)), g.integers(0, 5, (B, T)), g.integers(0, 2, (B, T))], -1)
+    batch = dict(states=torch.from_numpy(st), actions=torch.from_numpy(g.integers(0, 5, (B, T))),
+                 timesteps=torch.from_numpy(g.integers(0, 50, (B, T))), pad=torch.zeros(B, T, dtype=torch.bool),
+                 subgoal_ids=torch.from_numpy(g.integers(0, 3, B)),
+                 subgoal_targets=torch.from_numpy(g.integers(-1, 5, (B, 2))),
+                 loss_mask=torch.ones(B, T, dtype=torch.bool))
+    loss = dt.loss(batch)
+    opt.zero_grad()
+    loss.backward()
+    opt.step()
+dt_ms = (time.perf_counter() - t) / steps * 1000
+lay = load_layout("keydoor_5x5")
+t = time.perf_counter()
+oc, _, _ = train_options(lay, 100, OptionCriticConfig(lay.n_flags, *lay.shape),
+                         OptionsConfig(env_steps=6000, learning_starts=1000, seed=0), progress=False)
+oc_s = time.perf_counter() - t
+print(f"{torch.backends.cpu.get_cpu_capability():<7} {torch.get_num_threads():>2}  {digest(dt)} {dt_ms:6.0f} ms/step"
+      f"  {digest(oc)} {oc_s:5.1f} s")
+"""
+
+PINNED = {"ATEN_CPU_CAPABILITY": "avx2", "MKL_CBWR": "COMPATIBLE", "DNNL_MAX_CPU_ISA": "AVX2", "OMP_NUM_THREADS": "2"}
+CONFIGS = [
+    ("native (this CPU's best kernels, torch's default threads)", {}),
+    ("ATEN_CPU_CAPABILITY=avx2", {"ATEN_CPU_CAPABILITY": "avx2"}),
+    ("DNNL_MAX_CPU_ISA=AVX2", {"DNNL_MAX_CPU_ISA": "AVX2"}),
+    ("MKL_CBWR=AUTO (MKL's reproducible mode, ISA still chosen per CPU)", {"MKL_CBWR": "AUTO"}),
+    ("MKL_CBWR=COMPATIBLE", {"MKL_CBWR": "COMPATIBLE"}),
+    ("OMP_NUM_THREADS=1", {"OMP_NUM_THREADS": "1"}),
+    ("pinned (hnsdt/reproducible.py)", PINNED),
+    ("pinned, second process", PINNED),
+]
+
+
+def main() -> int:
+    from hnsdt.reproducible import PINNED_CPU
+
+    assert PINNED == PINNED_CPU, "keep this benchmark's pinned row equal to hnsdt/reproducible.py"
+    base = {k: v for k, v in os.environ.items() if k not in PINNED_CPU}
+    base["PYTHONHASHSEED"] = "0"
+    print(f"{'configuration':<68} {'ISA':<7} {'th':>2}  {'DT weights':<12} {'DT step':>14}  "
+          f"{'OC weights':<12} {'OC 6k':>7}")
+    for name, extra in CONFIGS:
+        out = subprocess.run([sys.executable, "-c", CHILD], env={**base, **extra}, capture_output=True, text=True)
+        line = out.stdout.strip() or f"failed: {out.stderr.strip().splitlines()[-1:]}"
+        print(f"{name:<68} {line}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

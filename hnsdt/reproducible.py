@@ -1,0 +1,57 @@
+"""Same seed, same bytes — on any x86-64 machine, not only the one that made them.
+
+Seeding fixes the random streams; the numerics still depend on which kernels the CPU runs. Measured with
+``benchmarks/cpu_determinism.py`` (a DT and an option-critic trained for a few steps, weights hashed), each of
+these alone changes the trained bytes, so each is pinned for every process of the pipeline and the tests:
+
+* ``ATEN_CPU_CAPABILITY=avx2`` — torch's own vectorised kernels (layer norm, softmax, reductions) otherwise
+  pick AVX-512 where the CPU has it and AVX2 where it does not;
+* ``MKL_CBWR=COMPATIBLE`` — MKL's conditional numerical reproducibility. MKL dispatches its GEMMs by vendor
+  and ISA; per Intel's documentation only ``COMPATIBLE`` (SSE2 without approximate reciprocals) gives the
+  same results on Intel and AMD processors alike (``AVX2`` is silently ignored on AMD);
+* ``DNNL_MAX_CPU_ISA=AVX2`` — oneDNN's JIT kernels (used by torch for some matmuls) likewise;
+* ``OMP_NUM_THREADS=2`` — parallel reductions split work by thread count: the machines of this project have 2
+  cores, so 2 threads is also torch's default here;
+* ``PYTHONHASHSEED=0`` — lerobot orders task lists through Python sets, whose order follows the string hash.
+
+The price, measured on a 2-core AMD EPYC (``benchmarks/cpu_determinism.py``): decision-transformer training
+steps are about 1.6× slower, option-critic training about 1.25×. ``HNSDT_CPU=native`` skips the pinning
+(hash seed excepted) for speed, at the cost of results that depend on the CPU that made them.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+PINNED_CPU = {
+    "ATEN_CPU_CAPABILITY": "avx2",
+    "MKL_CBWR": "COMPATIBLE",
+    "DNNL_MAX_CPU_ISA": "AVX2",
+    "OMP_NUM_THREADS": "2",
+}
+
+
+def pinned_environment() -> dict[str, str]:
+    """The variables this process should run under (``HNSDT_CPU=native`` keeps only the hash seed)."""
+    env = {"PYTHONHASHSEED": "0"}
+    if os.environ.get("HNSDT_CPU", "pinned") != "native":
+        env.update(PINNED_CPU)
+    return env
+
+
+def pin_environment() -> None:
+    """Set the pinned variables in ``os.environ`` of a process that has not imported torch yet (the tests);
+    the hash seed only takes effect in child processes."""
+    if "torch" in sys.modules:
+        raise RuntimeError("pin_environment() must run before torch is imported")
+    os.environ.update(pinned_environment())
+
+
+def pin_process() -> None:
+    """Re-run this process once under the pinned variables, before any heavy import (the stage scripts and
+    the ``hnsdt`` command). The hash seed cannot change inside a running interpreter, hence the re-exec."""
+    wanted = pinned_environment()
+    if any(os.environ.get(k) != v for k, v in wanted.items()):
+        os.environ.update(wanted)
+        os.execv(sys.executable, [sys.executable, *sys.argv])
