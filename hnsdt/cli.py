@@ -8,17 +8,8 @@ line and exit status 2.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
-
-
-def ensure_deterministic_hashing() -> None:
-    """Same seed, same files: lerobot orders task lists through Python sets, whose order depends on the
-    per-process string hash seed. Re-run this process once with a fixed seed, before heavy imports."""
-    if os.environ.get("PYTHONHASHSEED") != "0":
-        os.environ["PYTHONHASHSEED"] = "0"
-        os.execv(sys.executable, [sys.executable, *sys.argv])
 
 
 def _resolve_env(args) -> tuple[str, object, int]:
@@ -155,6 +146,7 @@ def cmd_train(args) -> None:
     import pandas as pd
 
     from hnsdt.config import env_settings, load_params, train_settings
+    from hnsdt.fileio import atomic_file
     from hnsdt.methods import DT_METHODS
 
     params = load_params(args.params)
@@ -165,10 +157,8 @@ def cmd_train(args) -> None:
     out = Path(args.out or f"models/{args.env}/{args.method}/seed{args.seed}")
     curve, usage = (_train_dt if args.method in DT_METHODS else _train_baseline)(params, args, args.seed, out)
     plot = Path(args.curve or f"plots/train/{args.env}-{args.method}-seed{args.seed}.csv")
-    plot.parent.mkdir(parents=True, exist_ok=True)
-    tmp = plot.with_name(f".{plot.name}.tmp")
-    pd.DataFrame(curve).to_csv(tmp, index=False)
-    tmp.replace(plot)
+    with atomic_file(plot) as tmp:
+        pd.DataFrame(curve).to_csv(tmp, index=False)
     facts = ", ".join(f"{k} {v}" for k, v in usage.items())
     print(f"trained {args.method} on {args.env}, seed {args.seed}: {facts}; final {_last_metric(curve)} -> {out}")
 
@@ -185,7 +175,8 @@ def cmd_evaluate(args) -> None:
     params = load_params(args.params)
     settings = evaluate_settings(params)
     envs = {e: env_settings(params, e) for e in settings["envs"]}
-    table = evaluate_all(settings, envs, executor_config(params), args.models, args.out, progress=not args.quiet)
+    table = evaluate_all(settings, envs, executor_config(params), args.models, args.out, progress=not args.quiet,
+                         recordings_dir=args.recordings)
     summ = summary(table)
     print(summ[["method", "env", "fail_prob", "success_mean", "steps_mean", "reward_mean"]].to_string(
         index=False, float_format=lambda v: f"{v:.3f}"))
@@ -291,6 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("evaluate", help="evaluate every method x env x fail_prob x seed (the `evaluate` stage)")
     p.add_argument("--models", default="models", help="checkpoint root (default: models)")
     p.add_argument("--out", default="results", help="results folder (default: results)")
+    p.add_argument("--recordings", help="episode recordings folder (default: recordings beside --out)")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=cmd_evaluate)
 
@@ -314,7 +306,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     if argv is None:
-        ensure_deterministic_hashing()
+        from hnsdt.reproducible import pin_process
+
+        pin_process()
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "replay" and not args.episode_id and args.dataset is None:
@@ -325,7 +319,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         args.func(args)
     except (ParamsError, LayoutError, ValueError, RuntimeError, OSError) as e:
-        print(f"hnsdt: error: {e}", file=sys.stderr)
+        print("hnsdt: error: " + " ".join(str(e).split()), file=sys.stderr)  # always one line
         return 2
     return 0
 

@@ -2,56 +2,23 @@
 
 import json
 import os
-import shutil
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pandas as pd
 import pytest
 import yaml
 
-from conftest import REPO
+from hnsdt.fileio import TMP_PREFIX
+from hnsdt.methods import LEARNED, METHODS
+from tiny_repo import lock_outs, make_tiny_repo, ran_stages, run
 
 pytestmark = pytest.mark.slow
 BIN = Path(sys.executable).parent
-STAGES = {"hnsdt": "train", "pure_dt": "train", "lstm_hier": "train_offline", "gru": "train_offline",
-          "dqn": "train_online", "options": "train_online"}  # learned method -> its DVC stage
-
-
-def _copy_repo(dst: Path) -> None:
-    tracked = subprocess.run(["git", "ls-files", "-co", "--exclude-standard"], cwd=REPO, capture_output=True,
-                             text=True, check=True).stdout.split()
-    for rel in tracked:
-        if rel.startswith(("data/", ".dvc/cache")) or rel == "dvc.lock" or not os.path.isfile(f"{REPO}/{rel}"):
-            continue
-        (dst / rel).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copy2(f"{REPO}/{rel}", dst / rel)
-
-
-def _tiny_params(path: Path) -> None:
-    params = yaml.safe_load(path.read_text())
-    params["collect"]["fail_probs"] = [0.1]
-    for b in params["collect"]["behaviours"]:
-        b["episodes"] = 3
-    params["train"].update(seeds=[0], epochs=1, max_steps=3)
-    for method in params["baselines"]["offline"]:
-        params["baselines"][method].update(epochs=1, max_steps=2)
-    for method in params["baselines"]["online"]:
-        params["baselines"][method].update(env_steps=400, learning_starts=200)
-    params["evaluate"].update(episodes=4, fail_probs=[0.0, 0.2])
-    path.write_text(yaml.safe_dump(params, sort_keys=False))
-
-
-def _run(args, cwd):
-    env = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}")
-    out = subprocess.run(args, cwd=cwd, env=env, capture_output=True, text=True)
-    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
-    return out.stdout + out.stderr
-
-
-def _ran(log: str) -> set[str]:
-    return {line.split("'")[1] for line in log.splitlines() if line.startswith("Running stage '")}
+STAGES = {m: METHODS[m].stage for m in LEARNED}  # learned method -> its DVC stage
 
 
 def _set(repo: Path, section: str, key: str, value) -> None:
@@ -65,20 +32,20 @@ def _set(repo: Path, section: str, key: str, value) -> None:
 
 @pytest.fixture(scope="module")
 def repo_copy(tmp_path_factory):
-    dst = tmp_path_factory.mktemp("pipeline") / "repo"
-    dst.mkdir()
-    _copy_repo(dst)
-    _tiny_params(dst / "params.yaml")
-    _run(["git", "init", "-q"], dst)
-    _run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "add", "-A"], dst)
-    _run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "copy"], dst)
-    return dst
+    return make_tiny_repo(tmp_path_factory.mktemp("pipeline") / "repo")
 
 
-def test_repro_runs_everything_then_nothing_then_only_what_changed(repo_copy):
+@pytest.fixture(scope="module")
+def first_run(repo_copy):
+    """The uninterrupted run: its log and the md5 of every output in its dvc.lock."""
+    log = run(["dvc", "repro"], repo_copy)
+    return log, lock_outs(repo_copy)
+
+
+def test_repro_runs_everything_then_nothing_then_only_what_changed(repo_copy, first_run):
     from hnsdt.data.lerobot_io import open_dataset
 
-    ran = _ran(_run(["dvc", "repro"], repo_copy))
+    ran = ran_stages(first_run[0])
     assert ran == {"collect@keydoor", "collect@multikeydoor", "evaluate", "report"} | {
         f"{STAGES[m]}@{env}-{m}-0" for env in ("keydoor", "multikeydoor") for m in STAGES}
     for env in ("keydoor", "multikeydoor"):
@@ -99,22 +66,27 @@ def test_repro_runs_everything_then_nothing_then_only_what_changed(repo_copy):
     report = (repo_copy / "report/report.md").read_text()
     lock = yaml.safe_load((repo_copy / "dvc.lock").read_text())
     dataset_md5 = lock["stages"]["collect@keydoor"]["outs"][0]["md5"]
-    rev = _run(["git", "rev-parse", "--short=12", "HEAD"], repo_copy).strip()
+    rev = run(["git", "rev-parse", "--short=12", "HEAD"], repo_copy).strip()
     assert dataset_md5 in report and "figures/comparison.png" in report and f"`{rev}" in report
     assert (repo_copy / "report/figures/success_heatmap.png").stat().st_size > 10_000
     assert "figures/paradigms.png" in report and "Agreement with the paper's claims" in report
 
-    assert _ran(_run(["dvc", "repro"], repo_copy)) == set()  # nothing changed: nothing reruns
+    assert ran_stages(run(["dvc", "repro"], repo_copy)) == set()  # nothing changed: nothing reruns
+    # a run leaves nothing for git to pick up but its lock file
+    status = run(["git", "status", "--porcelain", "--untracked-files=all"], repo_copy).splitlines()
+    assert {line[3:] for line in status} == {"dvc.lock"}, status
 
     _set(repo_copy, "evaluate", "episodes", 5)
-    assert _ran(_run(["dvc", "repro"], repo_copy)) == {"evaluate", "report"}
+    assert ran_stages(run(["dvc", "repro"], repo_copy)) == {"evaluate", "report"}
 
     _set(repo_copy, "baselines.dqn", "lr", 0.001)  # one method's knob: only its instances retrain
-    assert _ran(_run(["dvc", "repro"], repo_copy)) == {
-        "train_online@keydoor-dqn-0", "train_online@multikeydoor-dqn-0", "evaluate", "report"}
+    # (the report reruns only if the evaluation's tables changed: they are the same bytes when 400 env steps
+    # of DQN at another learning rate still act the same in the few evaluated episodes)
+    assert ran_stages(run(["dvc", "repro"], repo_copy)) - {"report"} == {
+        "train_online@keydoor-dqn-0", "train_online@multikeydoor-dqn-0", "evaluate"}
 
     _set(repo_copy, "envs.keydoor", "max_steps", 60)
-    assert _ran(_run(["dvc", "repro"], repo_copy)) == {"collect@keydoor", "evaluate", "report"} | {
+    assert ran_stages(run(["dvc", "repro"], repo_copy)) == {"collect@keydoor", "evaluate", "report"} | {
         f"{STAGES[m]}@keydoor-{m}-0" for m in STAGES}
 
 
@@ -122,7 +94,49 @@ def test_replay_points_to_an_evaluated_episode(repo_copy):
     out = subprocess.run([sys.executable, "-m", "hnsdt.cli", "replay", "hnsdt/keydoor/fp0.2/seed0/ep0"],
                          cwd=repo_copy, capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
-    assert "results/logs/hnsdt/keydoor/fp0.2/seed0/ep0.rrd" in out.stdout and ".mcap" in out.stdout
+    assert "recordings/hnsdt/keydoor/fp0.2/seed0/ep0.rrd" in out.stdout and ".mcap" in out.stdout
     missing = subprocess.run([sys.executable, "-m", "hnsdt.cli", "replay", "hnsdt/keydoor/fp0.2/seed0/ep3"],
                              cwd=repo_copy, capture_output=True, text=True)
     assert missing.returncode == 2 and "was not recorded" in missing.stderr
+
+
+def _tmp_under(folder: Path) -> bool:
+    return folder.is_dir() and any(p.name.startswith(TMP_PREFIX) for p in folder.iterdir())
+
+
+# (what to wait for before SIGKILL, the final output that must then not exist half-written)
+KILL_POINTS = {
+    "collect": (lambda repo, log: _tmp_under(repo / "data/datasets"), "data/datasets/keydoor"),
+    "train": (lambda repo, log: "Running stage 'train@" in log and time.sleep(1.0) is None, None),
+    "evaluate": (lambda repo, log: _tmp_under(repo), "results"),
+}
+
+
+def test_killed_runs_resume_to_the_same_outputs(tmp_path, first_run):
+    """SIGKILL `dvc repro` during collect, during a training stage and during evaluate; each next run picks
+    up cleanly, no half-written output is ever at its final path, and the outputs equal the uninterrupted
+    run's, byte for byte (the .rrd recordings excepted: rerun's row ids are time-based)."""
+    repo = make_tiny_repo(tmp_path / "repo")
+    env = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")  # the log as it happens
+    for stage, (ready, final) in KILL_POINTS.items():
+        log_path = tmp_path / f"{stage}.log"
+        with open(log_path, "w") as log:
+            proc = subprocess.Popen(["dvc", "repro"], cwd=repo, env=env, stdout=log, stderr=subprocess.STDOUT,
+                                    start_new_session=True)
+        deadline = time.monotonic() + 300
+        while not ready(repo, log_path.read_text()):
+            assert proc.poll() is None, f"dvc repro ended before reaching {stage}:\n{log_path.read_text()[-2000:]}"
+            assert time.monotonic() < deadline, f"never reached {stage}"
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        assert f"Running stage '{stage}" in log_path.read_text()
+        if final:
+            assert not (repo / final).exists(), f"half-written {final} after a kill during {stage}"
+    run(["dvc", "repro"], repo)
+    assert not list(repo.rglob(f"{TMP_PREFIX}*")), "temporaries of killed writes were not cleaned up"
+    status = run(["git", "status", "--porcelain", "--untracked-files=all"], repo).splitlines()
+    assert {line[3:] for line in status} == {"dvc.lock"}, status
+    outs, reference = lock_outs(repo), first_run[1]
+    assert outs.keys() == reference.keys()
+    assert {k for k in outs if outs[k] != reference[k]} <= {"evaluate:recordings"}

@@ -202,9 +202,13 @@ def metrics_json(summ: pd.DataFrame) -> dict:
 
 
 def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig, models_root: str | Path,
-                 out_dir: str | Path, progress: bool = True) -> pd.DataFrame:
-    """Run every cell, write ``episodes.csv``, ``summary.csv``, ``metrics.json`` and the episode recordings
-    under ``out_dir`` (built in a temporary folder, moved into place when complete)."""
+                 out_dir: str | Path, progress: bool = True, recordings_dir: str | Path | None = None) -> pd.DataFrame:
+    """Run every cell, write ``episodes.csv``, ``summary.csv``, ``metrics.json`` under ``out_dir`` and the
+    episode recordings under ``recordings_dir`` (default: ``recordings`` beside ``out_dir``), each built in a
+    temporary folder and moved into place when complete.
+
+    The recordings live apart from the tables because rerun stamps every row of an ``.rrd`` with a
+    time-based id: the tables are the same bytes on every run, the ``.rrd`` files cannot be."""
     import json
 
     from tqdm import tqdm
@@ -215,9 +219,11 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
     from hnsdt.agents.navigation import Navigator
 
     out = Path(out_dir)
+    rec_out = Path(recordings_dir) if recordings_dir is not None else out.parent / "recordings"
     navigators = {e: Navigator(envs[e]["layout"]) for e in settings["envs"]}
-    with atomic_dir(out) as tmp:
+    with atomic_dir(out) as tmp, atomic_dir(rec_out) as rec_tmp:
         tmp.mkdir()
+        rec_tmp.mkdir()
         rows, seg_rows, params_count, usage = [], [], {}, []
         cells = [(m, e, fi, f, s) for m in settings["methods"] for e in settings["envs"]
                  for fi, f in enumerate(settings["fail_probs"]) for s in settings["seeds"]]
@@ -235,12 +241,12 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
             seg_rows += segment_rows(cell, episodes, navigators[env])
             if seed == settings["seeds"][0]:
                 for i in range(settings["log_episodes"]):
-                    rel = Path("logs") / method / env / f"fp{fail_prob:g}" / f"seed{seed}" / f"ep{i}"
+                    rel = Path(method) / env / f"fp{fail_prob:g}" / f"seed{seed}" / f"ep{i}"
                     rec = record_from_episode(cell.episode_id(i), lay, episodes[i], {"method": method})
-                    write_rrd(tmp / rel.with_suffix(".rrd"), rec, episode_index=i)
-                    write_mcap(tmp / rel.with_suffix(".mcap"), rec)
-                    cell_rows[i]["rrd"] = str(Path(out.name) / rel.with_suffix(".rrd"))
-                    cell_rows[i]["mcap"] = str(Path(out.name) / rel.with_suffix(".mcap"))
+                    write_rrd(rec_tmp / rel.with_suffix(".rrd"), rec, episode_index=i)
+                    write_mcap(rec_tmp / rel.with_suffix(".mcap"), rec)
+                    cell_rows[i]["rrd"] = str(Path(rec_out.name) / rel.with_suffix(".rrd"))
+                    cell_rows[i]["mcap"] = str(Path(rec_out.name) / rel.with_suffix(".mcap"))
             rows += cell_rows
         table = pd.DataFrame(rows)
         for col in ("rrd", "mcap"):

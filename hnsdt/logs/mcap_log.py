@@ -10,6 +10,7 @@ import foxglove
 from foxglove.channels import LogChannel, RawImageChannel
 from foxglove.messages import Log, LogLevel, RawImage, Timestamp
 
+from hnsdt.fileio import atomic_file
 from hnsdt.envs.keydoor import ACTION_NAMES
 from hnsdt.envs.render import render_rgb
 from hnsdt.logs.record import EpisodeRecord
@@ -30,37 +31,36 @@ STEP_SCHEMA = {
 def write_mcap(path: str | Path, rec: EpisodeRecord) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    ctx = foxglove.Context()  # a context of its own, so channels never leak between files
-    writer = foxglove.open_mcap(str(tmp), allow_overwrite=True, context=ctx)
-    try:
-        grid = RawImageChannel("/grid", context=ctx)
-        events = LogChannel("/events", context=ctx)
-        steps = foxglove.Channel("/step", schema=STEP_SCHEMA, message_encoding="json", context=ctx)
-        dt_ns = int(1e9 / rec.fps)
-        cum, prev = 0.0, None
-        for t in range(rec.length):
-            ns = t * dt_ns
-            stamp = Timestamp(sec=ns // 10**9, nsec=ns % 10**9)
-            img = render_rgb(rec.layout, rec.states[t])
-            grid.log(RawImage(timestamp=stamp, frame_id="grid", width=img.shape[1], height=img.shape[0],
-                              encoding="rgb8", step=img.shape[1] * 3, data=img.tobytes()), log_time=ns)
-            name = ID_TO_NAME[int(rec.subgoal_ids[t])]
-            if name != prev:
-                events.log(Log(timestamp=stamp, level=LogLevel.Info, message=f"sub-goal -> {name}",
-                               name="executor"), log_time=ns)
-                prev = name
-            action = int(rec.actions[t])
-            events.log(Log(timestamp=stamp, level=LogLevel.Debug, message=f"action {ACTION_NAMES[action]}",
-                           name="policy"), log_time=ns)
-            cum += float(rec.rewards[t])
-            steps.log(json.dumps({
-                "episode_id": rec.episode_id, "step": t, "state": [int(v) for v in rec.states[t]],
-                "state_names": rec.layout.state_names, "action": action, "action_name": ACTION_NAMES[action],
-                "subgoal_id": int(rec.subgoal_ids[t]), "subgoal": name, "reward": float(rec.rewards[t]),
-                "return": cum,
-            }), log_time=ns)
-    finally:
-        writer.close()
-    tmp.replace(path)
+    with atomic_file(path) as tmp:
+        ctx = foxglove.Context()  # a context of its own, so channels never leak between files
+        writer = foxglove.open_mcap(str(tmp), allow_overwrite=True, context=ctx)
+        try:
+            grid = RawImageChannel("/grid", context=ctx)
+            events = LogChannel("/events", context=ctx)
+            steps = foxglove.Channel("/step", schema=STEP_SCHEMA, message_encoding="json", context=ctx)
+            dt_ns = int(1e9 / rec.fps)
+            cum, prev = 0.0, None
+            for t in range(rec.length):
+                ns = t * dt_ns
+                stamp = Timestamp(sec=ns // 10**9, nsec=ns % 10**9)
+                img = render_rgb(rec.layout, rec.states[t])
+                grid.log(RawImage(timestamp=stamp, frame_id="grid", width=img.shape[1], height=img.shape[0],
+                                  encoding="rgb8", step=img.shape[1] * 3, data=img.tobytes()), log_time=ns)
+                name = ID_TO_NAME[int(rec.subgoal_ids[t])]
+                if name != prev:
+                    events.log(Log(timestamp=stamp, level=LogLevel.Info, message=f"sub-goal -> {name}",
+                                   name="executor"), log_time=ns)
+                    prev = name
+                action = int(rec.actions[t])
+                events.log(Log(timestamp=stamp, level=LogLevel.Debug, message=f"action {ACTION_NAMES[action]}",
+                               name="policy"), log_time=ns)
+                cum += float(rec.rewards[t])
+                steps.log(json.dumps({
+                    "episode_id": rec.episode_id, "step": t, "state": [int(v) for v in rec.states[t]],
+                    "state_names": rec.layout.state_names, "action": action, "action_name": ACTION_NAMES[action],
+                    "subgoal_id": int(rec.subgoal_ids[t]), "subgoal": name, "reward": float(rec.rewards[t]),
+                    "return": cum,
+                }), log_time=ns)
+        finally:
+            writer.close()
     return path

@@ -9,6 +9,7 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from hnsdt.envs.keydoor import ACTION_NAMES
+from hnsdt.fileio import atomic_file
 from hnsdt.envs.render import render_rgb
 from hnsdt.logs.record import EpisodeRecord
 from hnsdt.symbolic.subgoals import ID_TO_NAME
@@ -44,8 +45,16 @@ def _plan_markdown(rec: EpisodeRecord) -> str:
 def write_rrd(path: str | Path, rec: EpisodeRecord, episode_index: int = 0) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    stream = rr.RecordingStream("hnsdt", recording_id=rec.episode_id)
+    # No wall clock in the file where rerun lets us leave it out: no start-time property, no `log_time`
+    # timeline (rerun's row ids stay time-based, so the bytes still differ from run to run).
+    stream = rr.RecordingStream("hnsdt", recording_id=rec.episode_id, send_properties=False)
+    stream.set_log_time_enabled(False)
+    with atomic_file(path) as tmp:
+        _log_episode(stream, tmp, rec, episode_index)
+    return path
+
+
+def _log_episode(stream: rr.RecordingStream, tmp: Path, rec: EpisodeRecord, episode_index: int) -> None:
     stream.save(str(tmp))
     stream.send_blueprint(blueprint())
     stream.set_time("episode", sequence=episode_index)
@@ -72,5 +81,3 @@ def write_rrd(path: str | Path, rec: EpisodeRecord, episode_index: int = 0) -> P
                                         level="INFO" if rec.success else "WARN"))
     stream.flush()
     stream.disconnect()
-    tmp.replace(path)
-    return path

@@ -12,6 +12,7 @@ from __future__ import annotations
 from itertools import combinations
 from pathlib import Path
 
+from hnsdt.fileio import atomic_file
 from hnsdt.envs.layout import Cell, Layout, reachable_cells
 from hnsdt.symbolic.abstraction import SymbolicState
 
@@ -117,7 +118,6 @@ def write_pddl(layout: Layout, out_dir: str | Path, state: SymbolicState | None 
     out.mkdir(parents=True, exist_ok=True)
     domain, problem = out / "domain.pddl", out / "problem.pddl"
     for path, text in ((domain, domain_pddl(layout, state)), (problem, problem_pddl(layout, state))):
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(text)
-        tmp.replace(path)
+        with atomic_file(path) as tmp:
+            tmp.write_text(text)
     return domain, problem

@@ -1,0 +1,76 @@
+"""A temporary copy of this repository with a tiny params override, as a git repo DVC can run in.
+
+Used by the end-to-end tests and by ``benchmarks/determinism.py``; nothing here is a test itself."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+
+REPO = Path(__file__).resolve().parent.parent
+BIN = Path(sys.executable).parent
+
+
+def copy_repo(dst: Path) -> None:
+    """Copy the tracked and untracked-not-ignored files, without data, DVC cache or lock file."""
+    tracked = subprocess.run(["git", "ls-files", "-co", "--exclude-standard"], cwd=REPO, capture_output=True,
+                             text=True, check=True).stdout.split()
+    for rel in tracked:
+        data = rel.startswith(("data/", ".dvc/cache")) and not rel.endswith(".gitignore")
+        if data or rel == "dvc.lock" or not (REPO / rel).is_file():
+            continue
+        (dst / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(REPO / rel, dst / rel)
+
+
+def tiny_params(path: Path) -> None:
+    """Every stage runs, each in seconds: 9 episodes per dataset, 1 seed, a few gradient / env steps."""
+    params = yaml.safe_load(path.read_text())
+    params["collect"]["fail_probs"] = [0.1]
+    for b in params["collect"]["behaviours"]:
+        b["episodes"] = 3
+    params["train"].update(seeds=[0], epochs=1, max_steps=3)
+    for method in params["baselines"]["offline"]:
+        params["baselines"][method].update(epochs=1, max_steps=2)
+    for method in params["baselines"]["online"]:
+        params["baselines"][method].update(env_steps=400, learning_starts=200)
+    params["evaluate"].update(episodes=4, fail_probs=[0.0, 0.2])
+    path.write_text(yaml.safe_dump(params, sort_keys=False))
+
+
+def run(args, cwd, check: bool = True, env: dict | None = None) -> str:
+    """Run a command with the venv first on PATH; stdout + stderr, asserting success if ``check``."""
+    env = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", **(env or {}))
+    out = subprocess.run(args, cwd=cwd, env=env, capture_output=True, text=True)
+    if check and out.returncode != 0:
+        raise AssertionError(f"{' '.join(map(str, args))} exited {out.returncode}:\n"
+                             + out.stdout[-3000:] + out.stderr[-3000:])
+    return out.stdout + out.stderr
+
+
+def make_tiny_repo(dst: Path) -> Path:
+    """A committed git repo at ``dst`` holding the project with tiny params."""
+    dst.mkdir(parents=True)
+    copy_repo(dst)
+    tiny_params(dst / "params.yaml")
+    run(["git", "init", "-q"], dst)
+    run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "add", "-A"], dst)
+    run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "copy",
+         "--date=2026-01-01T00:00:00Z"], dst, env={"GIT_COMMITTER_DATE": "2026-01-01T00:00:00Z"})  # same sha each time
+    return dst
+
+
+def ran_stages(log: str) -> set[str]:
+    """The stages a `dvc repro` log says it ran."""
+    return {line.split("'")[1] for line in log.splitlines() if line.startswith("Running stage '")}
+
+
+def lock_outs(repo: Path) -> dict[str, str]:
+    """``stage:out path -> md5`` of every output recorded in ``dvc.lock``."""
+    lock = yaml.safe_load((repo / "dvc.lock").read_text())
+    return {f"{stage}:{o['path']}": o.get("md5", "") for stage, s in lock["stages"].items() for o in s.get("outs", [])}
