@@ -17,6 +17,9 @@ LEARNED_METHODS = DT_METHODS  # the decision transformers, configured under `tra
 EVAL_METHODS = tuple(METHODS)
 
 
+SECTIONS = ("envs", "planner", "collect", "models", "train", "baselines", "evaluate", "logs", "theorems")
+
+
 class ParamsError(ValueError):
     """A malformed params file; the message names the file and the key."""
 
@@ -33,6 +36,9 @@ def load_params(path: str | Path = "params.yaml") -> dict[str, Any]:
         raise ParamsError(f"{path}: not valid YAML{where}") from None
     if not isinstance(params, dict):
         raise ParamsError(f"{path}: expected a mapping of sections at the top level")
+    unknown = sorted(set(params) - set(SECTIONS))
+    if unknown:
+        raise ParamsError(f"{path}: unknown section(s) {unknown}; params.yaml has {', '.join(SECTIONS)}")
     params["_path"] = str(path)
     return params
 

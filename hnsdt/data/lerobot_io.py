@@ -147,25 +147,38 @@ def check_dataset(root: str | Path) -> dict:
         raise DatasetError(f"dataset {root}: corrupt JSON metadata ({e})") from None
     if info.get("codebase_version") != "v3.0":
         raise DatasetError(f"dataset {root}: LeRobot format {info.get('codebase_version')}, expected v3.0")
-    missing = set(dataset_features_names()) - set(info.get("features", {}))
+    features = info.get("features", {})
+    missing = set(FEATURE_DTYPES) - set(features)
     if missing:
         raise DatasetError(f"dataset {root}: features {sorted(missing)} are missing from meta/info.json")
+    for name, dtype in FEATURE_DTYPES.items():
+        if features[name].get("dtype") != dtype:
+            raise DatasetError(f"dataset {root}: feature {name!r} has dtype {features[name].get('dtype')}, "
+                               f"expected {dtype} (meta/info.json)")
+    if not isinstance(info.get("total_episodes"), int) or info["total_episodes"] < 1:
+        raise DatasetError(f"dataset {root}: no episodes (meta/info.json total_episodes = "
+                           f"{info.get('total_episodes')!r})")
     return meta
 
 
-def dataset_features_names() -> list[str]:
-    return ["observation.state", "action", "next.reward", "next.done", "next.success", "subgoal", "subgoal.target"]
+FEATURE_DTYPES = {"observation.state": "int64", "action": "int64", "next.reward": "float32", "next.done": "bool",
+                  "next.success": "bool", "subgoal": "int64", "subgoal.target": "int64"}  # as written above
 
 
 def open_dataset(root: str | Path, delta_timestamps: dict | None = None, repo_id: str | None = None
                  ) -> LeRobotDataset:
     """Open one of our datasets with stock ``LeRobotDataset`` (offline), after checking its files."""
     meta = check_dataset(root)
+    logging.disable(logging.ERROR)  # `datasets` logs a damaged file before raising; the error below says it once
     try:
         return LeRobotDataset(repo_id or meta.get("repo_id", "local/hnsdt"), root=Path(root),
                               delta_timestamps=delta_timestamps)
     except Exception as e:  # noqa: BLE001  (pyarrow, datasets and lerobot raise many kinds)
-        raise DatasetError(f"dataset {root}: LeRobot cannot read it ({type(e).__name__}: {e})") from None
+        cause = e.__cause__ or e.__context__
+        why = f"{type(e).__name__}: {e}" + (f"; {type(cause).__name__}: {cause}" if cause else "")
+        raise DatasetError(f"dataset {root}: LeRobot cannot read it ({why})") from None
+    finally:
+        logging.disable(logging.NOTSET)
 
 
 def episode_table(root: str | Path) -> pd.DataFrame:

@@ -39,13 +39,27 @@ def load_checkpoint(path: str | Path, device: str = "cpu") -> tuple[torch.nn.Mod
     for name in ("model.safetensors", "config.json"):
         if not (path / name).is_file():
             raise FileNotFoundError(f"checkpoint {path}: missing {name} (run `dvc repro`)")
-    meta = json.loads((path / "config.json").read_text())
+    try:
+        meta = json.loads((path / "config.json").read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"checkpoint {path}: config.json is not valid JSON ({e})") from None
     arch = meta.get("arch", "decision_transformer")
     if arch not in ARCHITECTURES:
         raise ValueError(f"checkpoint {path}: unknown arch {arch!r}")
     module, cfg_cls, model_cls = ARCHITECTURES[arch]
     mod = importlib.import_module(module)
-    model = getattr(mod, model_cls)(getattr(mod, cfg_cls)(**meta["model"]))
-    model.load_state_dict(load_file(str(path / "model.safetensors"), device=device))
+    try:
+        model = getattr(mod, model_cls)(getattr(mod, cfg_cls)(**meta["model"]))
+    except (KeyError, TypeError, ValueError) as e:
+        raise ValueError(f"checkpoint {path}: config.json does not describe a {arch} ({e})") from None
+    try:
+        weights = load_file(str(path / "model.safetensors"), device=device)
+    except Exception as e:  # noqa: BLE001  (safetensors raises its own error type for a damaged file)
+        raise ValueError(f"checkpoint {path}: model.safetensors is unreadable ({type(e).__name__}: {e})") from None
+    try:
+        model.load_state_dict(weights)
+    except RuntimeError:
+        raise ValueError(f"checkpoint {path}: the weights in model.safetensors do not match the {arch} that "
+                         "config.json describes (shapes or names differ)") from None
     model.to(device).eval()
     return model, meta

@@ -1,0 +1,217 @@
+"""Bad input, end to end through the `hnsdt` command: each case exits with status 2, prints exactly one line
+naming the problem, and leaves no output behind (the README lists what is checked)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from conftest import REPO
+
+PARAMS = yaml.safe_load(Path(REPO, "params.yaml").read_text())
+
+
+def hnsdt(*args, cwd):
+    return subprocess.run([sys.executable, "-m", "hnsdt.cli", *map(str, args)], cwd=cwd, capture_output=True,
+                          text=True)
+
+
+def assert_one_error_line(out, match: str) -> None:
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2, out.stderr[-2000:]
+    assert len(lines) == 1 and lines[0].startswith("hnsdt: error:"), out.stderr[-2000:]
+    assert match in lines[0], lines[0]
+
+
+def small_params(**edits) -> dict:
+    """Case 1 only, HNSDT and the symbolic planner, one seed: what the dataset and checkpoint cases run."""
+    p = json.loads(json.dumps(PARAMS))
+    p["envs"] = {"keydoor": p["envs"]["keydoor"]}
+    p["envs"]["keydoor"]["layout"] = str(Path(REPO, p["envs"]["keydoor"]["layout"]))
+    p["collect"]["fail_probs"] = [0.1]
+    for b in p["collect"]["behaviours"]:
+        b["episodes"] = 2
+    p["train"].update(envs=["keydoor"], methods=["hnsdt"], seeds=[0], epochs=1, max_steps=2)
+    p["baselines"].update(offline=[], online=[])
+    p["evaluate"].update(methods=["symbolic", "hnsdt"], episodes=2, fail_probs=[0.1])
+    for dotted, value in edits.items():
+        node = p
+        *parents, key = dotted.split(".")
+        for part in parents:
+            node = node[int(part)] if isinstance(node, list) else node[part]
+        if value is DELETE:
+            del node[key]
+        else:
+            node[key] = value
+    return p
+
+
+DELETE = object()
+
+
+@pytest.fixture(scope="module")
+def workdir(tmp_path_factory):
+    """A folder with small params, a collected Case 1 dataset and a trained HNSDT seed-0 checkpoint."""
+    root = tmp_path_factory.mktemp("bad-input")
+    (root / "params.yaml").write_text(yaml.safe_dump(small_params(), sort_keys=False))
+    for args in (["collect", "--env", "keydoor", "--out", root / "data/datasets/keydoor", "--quiet"],
+                 ["train", "--env", "keydoor", "--method", "hnsdt", "--seed", "0", "--quiet",
+                  "--dataset", root / "data/datasets/keydoor", "--out", root / "models/keydoor/hnsdt/seed0",
+                  "--curve", root / "curve.csv"]):
+        out = hnsdt(*args, cwd=root)
+        assert out.returncode == 0, out.stderr[-2000:]
+    return root
+
+
+def _case_dir(workdir: Path, tmp_path: Path) -> Path:
+    """A private copy of the work folder, so a case's corruption stays its own."""
+    dst = tmp_path / "w"
+    shutil.copytree(workdir, dst)
+    return dst
+
+
+def _outputs(root: Path) -> set[str]:
+    return {str(p.relative_to(root)) for p in root.rglob("*")}
+
+
+# --- params: (edits, command, expected words) -------------------------------------------------------------
+COLLECT = ["collect", "--env", "keydoor", "--out", "out", "--quiet"]
+EVALUATE = ["evaluate", "--out", "res", "--recordings", "rec", "--quiet"]
+PARAM_CASES = {
+    "wrong type": ({"envs.keydoor.max_steps": "ten"}, COLLECT, "envs.keydoor.max_steps must be int"),
+    "unknown top-level key": ({"colect": {"seed": 1}}, COLLECT, "unknown section(s) ['colect']"),
+    "unknown behaviour key": ({"collect.behaviours.0.episods": 3}, COLLECT, "unknown keys ['episods']"),
+    "negative episodes": ({"collect.behaviours.0.episodes": -5}, COLLECT, "episodes"),
+    "fail_prob above 1": ({"collect.fail_probs": [0.1, 1.5]}, COLLECT, "collect.fail_probs"),
+    "fail_prob below 0": ({"evaluate.fail_probs": [-0.1]}, EVALUATE, "evaluate.fail_probs"),
+    "unknown env id": ({"envs.keydoor.id": "hnsdt/Nope-v0"}, COLLECT, "not a registered id"),
+    "unknown method": ({"evaluate.methods": ["symbolic", "ppo"]}, EVALUATE, "['ppo']"),
+    "unknown behaviour policy": ({"collect.behaviours.0.policy": "teleport"}, COLLECT, "policy must be one of"),
+    "unknown executor mode": ({"planner.mode": "astar"}, COLLECT, "planner.mode must be one of"),
+    "empty seed list": ({"train.seeds": []}, EVALUATE, "train.seeds"),
+    "missing section": ({"collect": DELETE}, COLLECT, "missing key collect"),
+}
+
+
+@pytest.mark.parametrize("edits, command, match", PARAM_CASES.values(), ids=PARAM_CASES.keys())
+def test_bad_params(tmp_path, edits, command, match):
+    (tmp_path / "params.yaml").write_text(yaml.safe_dump(small_params(**edits), sort_keys=False))
+    out = hnsdt(*command, cwd=tmp_path)
+    assert_one_error_line(out, match)
+    assert _outputs(tmp_path) == {"params.yaml"}
+
+
+# --- layout files: (text, expected words) -----------------------------------------------------------------
+LAYOUT_CASES = {
+    "ragged rows": ("@..G\n...\n", "rectangular"),
+    "no start": ("....\n.a.G\n", "no start"),
+    "two starts": ("@..G\n@...\n", "more than one start"),
+    "door without its key": ("@.B.G\n", "no key"),
+    "unreachable exit": ("@.#G\n..#.\n", "no path"),
+    "unreachable item": ("@..G\n###.\n1#..\n", "item"),
+    "unknown character": ("@.?G\n", "unknown character"),
+    "empty file": ("", "empty"),
+}
+
+
+@pytest.mark.parametrize("text, match", LAYOUT_CASES.values(), ids=LAYOUT_CASES.keys())
+def test_bad_layout_files(tmp_path, text, match):
+    layout = tmp_path / "bad_layout.txt"
+    layout.write_text(text)
+    out = hnsdt("pddl", "--env", "hnsdt/KeyDoor-v0", "--layout", layout, "--out", tmp_path / "pddl", cwd=tmp_path)
+    assert_one_error_line(out, match)
+    assert _outputs(tmp_path) == {"bad_layout.txt"}
+
+
+# --- datasets: (corruption, expected words) ---------------------------------------------------------------
+def _drop_info(ds: Path) -> None:
+    (ds / "meta/info.json").unlink()
+
+
+def _truncate_parquet(ds: Path) -> None:
+    data = sorted((ds / "data").rglob("*.parquet"))[0]
+    data.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
+
+
+def _wrong_dtype(ds: Path) -> None:
+    info = json.loads((ds / "meta/info.json").read_text())
+    info["features"]["action"]["dtype"] = "float32"
+    (ds / "meta/info.json").write_text(json.dumps(info))
+
+
+def _zero_episodes(ds: Path) -> None:
+    info = json.loads((ds / "meta/info.json").read_text())
+    info["total_episodes"] = 0
+    (ds / "meta/info.json").write_text(json.dumps(info))
+
+
+DATASET_CASES = {
+    "missing meta/info.json": (_drop_info, "missing meta/info.json"),
+    "truncated parquet": (_truncate_parquet, "cannot read"),
+    "feature with the wrong dtype": (_wrong_dtype, "feature 'action' has dtype float32, expected int64"),
+    "zero episodes": (_zero_episodes, "no episodes"),
+}
+
+
+@pytest.mark.parametrize("corrupt, match", DATASET_CASES.values(), ids=DATASET_CASES.keys())
+def test_bad_datasets(workdir, tmp_path, corrupt, match):
+    w = _case_dir(workdir, tmp_path)
+    corrupt(w / "data/datasets/keydoor")
+    before = _outputs(w)
+    out = hnsdt("train", "--env", "keydoor", "--method", "hnsdt", "--seed", "1", "--quiet", "--out", "m",
+                "--curve", "c.csv", "--dataset", w / "data/datasets/keydoor", cwd=w)
+    assert_one_error_line(out, match)
+    assert _outputs(w) == before
+
+
+# --- checkpoints: (corruption or params edit, expected words) ---------------------------------------------
+def _truncate_weights(models: Path) -> None:
+    f = models / "keydoor/hnsdt/seed0/model.safetensors"
+    f.write_bytes(f.read_bytes()[:100])
+
+
+def _mismatched_config(models: Path) -> None:
+    f = models / "keydoor/hnsdt/seed0/config.json"
+    meta = json.loads(f.read_text())
+    meta["model"]["d_model"] = 64
+    f.write_text(json.dumps(meta))
+
+
+def _missing_seed(models: Path) -> None:
+    shutil.rmtree(models / "keydoor/hnsdt/seed0")
+
+
+CHECKPOINT_CASES = {
+    "truncated safetensors": (_truncate_weights, "model.safetensors"),
+    "config that does not match the weights": (_mismatched_config, "do not match"),
+    "missing seed": (_missing_seed, "missing"),
+}
+
+
+@pytest.mark.parametrize("corrupt, match", CHECKPOINT_CASES.values(), ids=CHECKPOINT_CASES.keys())
+def test_bad_checkpoints(workdir, tmp_path, corrupt, match):
+    w = _case_dir(workdir, tmp_path)
+    corrupt(w / "models")
+    before = _outputs(w)
+    out = hnsdt(*EVALUATE, cwd=w)
+    assert_one_error_line(out, match)
+    assert _outputs(w) == before
+
+
+def test_replay_of_an_episode_that_does_not_exist(workdir, tmp_path):
+    w = _case_dir(workdir, tmp_path)
+    assert hnsdt("evaluate", "--quiet", cwd=w).returncode == 0
+    before = _outputs(w)
+    out = hnsdt("replay", "hnsdt/keydoor/fp0.1/seed0/ep99", cwd=w)
+    assert_one_error_line(out, "no episode 'hnsdt/keydoor/fp0.1/seed0/ep99'")
+    assert _outputs(w) == before
+
+
+def test_the_table_has_at_least_twenty_cases():
+    assert len(PARAM_CASES) + len(LAYOUT_CASES) + len(DATASET_CASES) + len(CHECKPOINT_CASES) + 1 >= 20
