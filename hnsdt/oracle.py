@@ -62,8 +62,9 @@ class MDP:
     def __len__(self) -> int:
         return len(self.states)
 
-    def solve(self, fail_prob: float, horizon: int) -> Optimum:
-        """Backward induction over ``horizon`` steps from the start state."""
+    def solve(self, fail_prob: float, horizon: int, gamma: float = 1.0) -> Optimum:
+        """Backward induction over ``horizon`` steps from the start state; ``gamma`` < 1 discounts the return
+        (``ret`` is then the optimal discounted value V*_γ; ``success`` and ``steps`` follow that policy)."""
         p = float(fail_prob)
         n = len(self)
         # Outcome probabilities per action: moves fail (stay) with p, pick/open never fails.
@@ -75,8 +76,9 @@ class MDP:
         w_steps = np.zeros(n)
         w_succ = np.zeros(n)
         for _ in range(horizon):
-            q_ret = STEP_REWARD + (1 - p_stay) * (GOAL_REWARD * reached + np.where(reached, 0.0, v_ret[self.succ]))
-            q_ret += p_stay * v_ret[:, None]
+            q_ret = STEP_REWARD + (1 - p_stay) * (GOAL_REWARD * reached
+                                                  + np.where(reached, 0.0, gamma * v_ret[self.succ]))
+            q_ret += p_stay * gamma * v_ret[:, None]
             q_succ = (1 - p_stay) * np.where(reached, 1.0, v_succ[self.succ]) + p_stay * v_succ[:, None]
             best = q_ret.argmax(axis=1)
             rows = np.arange(n)
@@ -102,5 +104,5 @@ def mdp_for(layout: Layout) -> MDP:
     return MDP(layout)
 
 
-def optimum(layout: Layout, fail_prob: float, horizon: int) -> Optimum:
-    return mdp_for(layout).solve(fail_prob, horizon)
+def optimum(layout: Layout, fail_prob: float, horizon: int, gamma: float = 1.0) -> Optimum:
+    return mdp_for(layout).solve(fail_prob, horizon, gamma)

@@ -25,6 +25,15 @@ def test_value_iteration_against_a_hand_computed_corridor(p, T):
     assert opt.steps == pytest.approx(steps)
 
 
+@pytest.mark.parametrize("p,T,gamma", [(0.5, 3, 0.9), (0.3, 6, 0.5)])
+def test_discounted_value_against_the_hand_computed_corridor(p, T, gamma):
+    """Theorem 1's V*_γ: the same corridor, each step's reward discounted by γ^t."""
+    cost = lambda k: sum(-0.1 * gamma**t for t in range(k))  # noqa: E731
+    value = sum((1 - p) * p ** (k - 1) * (cost(k) + gamma ** (k - 1)) for k in range(1, T + 1))
+    value += p**T * cost(T)
+    assert optimum(load_layout("@G"), p, T, gamma).ret == pytest.approx(value)
+
+
 def test_a_two_step_detour_layout_by_hand():
     """'@a#\\n.A.G'... kept tiny: key, door, goal in a row; at fail 0 the optimum is the planner's cost."""
     layout = load_layout("@aAG")

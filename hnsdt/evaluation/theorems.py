@@ -4,15 +4,21 @@ Theorem 1 (hierarchical performance bound)::
 
     V* − V^hyb ≤ ε_sym/(1−γ) + ε_exec/(1−γ)² + ρB/(1−γ)²
 
-estimated from evaluation episodes of a plan-following method, per env × fail_prob:
+in the theorem's own units: values are discounted returns with the theorem's γ, costs are in reward units
+(a step costs |r_step| = 0.1). Estimated from evaluation episodes of a plan-following method, per env × fail_prob:
 
-* ε_sym: cost of the executed initial plan minus the cheapest plan's cost (steps without failures);
-* ε_exec: the largest, over operators, of (mean steps to achieve the operator − its optimal expected steps
-  from the segment's start state; a shortest path of d moves takes d/(1−p) in expectation, pick/open 1);
+* measured side: V*_γ(s₀) − V^π_γ(s₀), with V*_γ the exact optimum (value iteration with discount γ,
+  :mod:`hnsdt.oracle`) and V^π_γ the mean discounted return of the episodes
+  (Σ_{t<T} γ^t r_step + 1{success} γ^{T−1} r_goal);
+* ε_sym: the executed initial plan's extra cost over the cheapest plan, |r_step| × (extra steps without
+  failures) — undiscounted, so an upper bound on the discounted extra cost;
+* ε_exec: the largest, over operators, of the mean discounted cost of achieving the operator minus its optimal
+  expected discounted cost from the segment's start state: a segment of n steps costs
+  |r_step|(1 − γⁿ)/(1 − γ); a shortest path of d moves that each fail with probability p costs
+  |r_step|(1 − qᵈ)/(1 − γ) in expectation, q = γ(1 − p)/(1 − γp) (the moment generating function of a sum of
+  d geometric trials); pick/open costs |r_step|;
 * ρ: the largest per-operator failure rate (segments that ended without their effect);
-* B: a bound on the extra cost of one failure (param), γ the discount (param).
-
-The measured side is the undiscounted regret V* − V^π in expected return (from :mod:`hnsdt.oracle`).
+* B: a bound on the extra cost of one failure, in reward units (param).
 
 Theorem 2 (PAC sub-goal completion)::
 
@@ -30,26 +36,48 @@ import math
 import numpy as np
 import pandas as pd
 
+from hnsdt.envs.keydoor import GOAL_REWARD, STEP_REWARD
 
-def theorem1(segments: pd.DataFrame, episodes: pd.DataFrame, summ: pd.DataFrame, gamma: float, bound_b: float,
+
+def discounted_returns(steps, success, gamma: float) -> np.ndarray:
+    """Each episode's discounted return, from its length and outcome (the reward is −0.1 a step, +1 more on
+    the step that succeeds)."""
+    steps = np.asarray(steps, dtype=np.float64)
+    step_part = STEP_REWARD * (1 - gamma**steps) / (1 - gamma)
+    return step_part + np.asarray(success, dtype=np.float64) * GOAL_REWARD * gamma ** (steps - 1)
+
+
+def optimal_operator_cost(optimal_steps, fail_prob: float, gamma: float, is_move) -> np.ndarray:
+    """Expected discounted cost of achieving an operator optimally: d moves (d = optimal_steps·(1 − p)) that
+    each take a geometric number of tries, or one pick/open step."""
+    d = np.asarray(optimal_steps, dtype=np.float64) * (1 - fail_prob)
+    q = gamma * (1 - fail_prob) / (1 - gamma * fail_prob)
+    moves = -STEP_REWARD * (1 - q**d) / (1 - gamma)
+    return np.where(is_move, moves, -STEP_REWARD)
+
+
+def theorem1(segments: pd.DataFrame, episodes: pd.DataFrame, v_star: dict, gamma: float, bound_b: float,
              method: str = "hnsdt") -> pd.DataFrame:
-    """One row per env × fail_prob: the estimated ε_sym, ε_exec, ρ, the bound, the measured regret."""
+    """One row per env × fail_prob: ε_sym, ε_exec, ρ, the bound, and the measured regret V*_γ − V^π_γ.
+    ``v_star[(env, fail_prob)]`` is the optimal discounted value of the start state."""
     rows = []
     seg = segments[segments.method == method]
     for (env, fail_prob), s in seg.groupby(["env", "fail_prob"]):
         ep = episodes[(episodes.method == method) & (episodes.env == env) & (episodes.fail_prob == fail_prob)]
         per_op = s.groupby("operator").agg(failure=("achieved", lambda a: 1.0 - a.mean()))
         done = s[s.achieved]
-        excess = (done.steps - done.optimal_steps).groupby(done.operator).mean()
+        cost = -STEP_REWARD * (1 - gamma ** done.steps.to_numpy(np.float64)) / (1 - gamma)
+        best = optimal_operator_cost(done.optimal_steps, fail_prob, gamma, done.operator.str.startswith("GoTo"))
+        excess = pd.Series(cost - best, index=done.index).groupby(done.operator).mean()
         eps_exec = max(0.0, float(excess.max())) if len(excess) else float("nan")
         rho = float(per_op.failure.max())
-        eps_sym = float((ep.plan_cost - ep.optimal_plan_cost).mean())
+        eps_sym = -STEP_REWARD * float((ep.plan_cost - ep.optimal_plan_cost).mean())
         bound = eps_sym / (1 - gamma) + eps_exec / (1 - gamma) ** 2 + rho * bound_b / (1 - gamma) ** 2
-        cell = summ[(summ.method == method) & (summ.env == env) & (summ.fail_prob == fail_prob)]
-        regret = float(cell.regret.iloc[0]) if len(cell) else float("nan")
+        value = float(discounted_returns(ep.steps, ep.success, gamma).mean())
+        regret = v_star[(env, fail_prob)] - value
         rows.append({"env": env, "fail_prob": fail_prob, "eps_sym": eps_sym, "eps_exec": eps_exec, "rho": rho,
-                     "B": bound_b, "gamma": gamma, "bound": bound, "measured_regret": regret,
-                     "holds": bool(regret <= bound + 1e-9),
+                     "B": bound_b, "gamma": gamma, "bound": bound, "v_star": v_star[(env, fail_prob)],
+                     "v_method": value, "measured_regret": regret, "holds": bool(regret <= bound + 1e-9),
                      "looseness": bound / regret if regret > 1e-9 else float("inf")})
     return pd.DataFrame(rows)
 
