@@ -8,6 +8,7 @@ line and exit status 2.
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 
@@ -80,13 +81,20 @@ def cmd_collect(args) -> None:
     print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
 
 
+@functools.lru_cache(maxsize=2)
+def _frames(dataset: str):
+    """A dataset's frames, read once per process however many seeds train on it."""
+    from hnsdt.data.windows import load_frames
+
+    return load_frames(dataset)
+
+
 def _train_dt(params, args, seed: int, out: Path) -> tuple[list[dict], dict]:
     from dataclasses import asdict, replace
 
     import numpy as np
 
     from hnsdt.config import model_config, train_settings
-    from hnsdt.data.windows import load_frames
     from hnsdt.evaluation.evaluate import LEARNED
     from hnsdt.models.train import save_checkpoint, train_dt
 
@@ -95,7 +103,7 @@ def _train_dt(params, args, seed: int, out: Path) -> tuple[list[dict], dict]:
         raise ValueError(f"method {args.method!r} is not in train.methods {ts['methods']}")
     model_cfg = model_config(params, args.env, LEARNED[args.method])
     dataset = Path(args.dataset or f"data/datasets/{args.env}")
-    frames = load_frames(dataset)
+    frames = _frames(str(dataset))
     cfg = replace(ts["config"], seed=seed, behaviours=ts["behaviours"][args.method])
     model, curve = train_dt(frames, model_cfg, cfg, progress=not args.quiet, desc=f"{args.method} seed {seed}")
     starts = np.unique(frames.episode_start)
@@ -124,10 +132,9 @@ def _train_baseline(params, args, seed: int, out: Path) -> tuple[list[dict], dic
     extra = {"env": args.env, "method": args.method, "seed": seed}
     if kind == "offline":
         from hnsdt.agents.baselines.recurrent import train_recurrent
-        from hnsdt.data.windows import load_frames
 
         dataset = Path(args.dataset or f"data/datasets/{args.env}")
-        model, curve, usage = train_recurrent(load_frames(dataset), bs["model"], bs["train"],
+        model, curve, usage = train_recurrent(_frames(str(dataset)), bs["model"], bs["train"],
                                               progress=not args.quiet, desc=desc)
         extra["dataset"] = str(dataset)
     else:
@@ -143,24 +150,33 @@ def _train_baseline(params, args, seed: int, out: Path) -> tuple[list[dict], dic
 
 
 def cmd_train(args) -> None:
+    """Train one method on one env for every seed (train.seeds, or --seed): one process, so the imports and
+    the dataset load are paid once. Same seed, same weights, however the seeds are grouped (tested)."""
     import pandas as pd
 
     from hnsdt.config import env_settings, load_params, train_settings
-    from hnsdt.fileio import atomic_file
+    from hnsdt.fileio import atomic_dir
     from hnsdt.methods import DT_METHODS
 
     params = load_params(args.params)
-    envs = train_settings(params)["envs"]
-    if args.env not in envs:
-        raise ValueError(f"env {args.env!r} is not in train.envs {envs}")
+    ts = train_settings(params)
+    if args.env not in ts["envs"]:
+        raise ValueError(f"env {args.env!r} is not in train.envs {ts['envs']}")
     env_settings(params, args.env)
-    out = Path(args.out or f"models/{args.env}/{args.method}/seed{args.seed}")
-    curve, usage = (_train_dt if args.method in DT_METHODS else _train_baseline)(params, args, args.seed, out)
-    plot = Path(args.curve or f"plots/train/{args.env}-{args.method}-seed{args.seed}.csv")
-    with atomic_file(plot) as tmp:
-        pd.DataFrame(curve).to_csv(tmp, index=False)
-    facts = ", ".join(f"{k} {v}" for k, v in usage.items())
-    print(f"trained {args.method} on {args.env}, seed {args.seed}: {facts}; final {_last_metric(curve)} -> {out}")
+    seeds = args.seed if args.seed is not None else ts["seeds"]
+    out = Path(args.out or f"models/{args.env}/{args.method}")
+    curves = Path(args.curves or f"plots/train/{args.env}-{args.method}")
+    train = _train_dt if args.method in DT_METHODS else _train_baseline
+    with atomic_dir(out) as staging, atomic_dir(curves) as curve_staging:
+        staging.mkdir()
+        curve_staging.mkdir()
+        for seed in seeds:
+            curve, usage = train(params, args, seed, staging / f"seed{seed}")
+            pd.DataFrame(curve).to_csv(curve_staging / f"seed{seed}.csv", index=False)
+            facts = ", ".join(f"{k} {v}" for k, v in usage.items())
+            print(f"trained {args.method} on {args.env}, seed {seed}: {facts}; final {_last_metric(curve)}",
+                  flush=True)
+    print(f"wrote {', '.join(f'seed{s}' for s in seeds)} -> {out}/ (curves: {curves}/)")
 
 
 def _last_metric(curve: list[dict]) -> str:
@@ -268,14 +284,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(func=cmd_collect)
 
-    p = sub.add_parser("train", help="train one learned method on one env with one seed (the `train`, "
+    p = sub.add_parser("train", help="train one learned method on one env, every seed (the `train`, "
                        "`train_offline` and `train_online` stages)")
     p.add_argument("--env", required=True, help="env name from train.envs")
     p.add_argument("--method", required=True, choices=list(LEARNED_NAMES))
-    p.add_argument("--seed", type=int, required=True)
+    p.add_argument("--seed", type=int, nargs="+", help="training seeds (default: train.seeds of params.yaml)")
     p.add_argument("--dataset", help="offline methods: LeRobot dataset folder (default: data/datasets/ENV)")
-    p.add_argument("--out", help="checkpoint folder (default: models/ENV/METHOD/seedSEED)")
-    p.add_argument("--curve", help="training-curve CSV (default: plots/train/ENV-METHOD-seedSEED.csv)")
+    p.add_argument("--out", help="checkpoints folder, one seedK/ per seed (default: models/ENV/METHOD)")
+    p.add_argument("--curves", help="training-curve folder, one seedK.csv per seed (default: "
+                   "plots/train/ENV-METHOD)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=cmd_train)
 

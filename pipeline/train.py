@@ -1,7 +1,8 @@
-"""DVC stages `train`, `train_offline` and `train_online`: one learned method on one env with one seed.
+"""DVC stages `train`, `train_offline` and `train_online`: one learned method on one env, every seed of
+train.seeds in this one process.
 
-Usage: python pipeline/train.py ENV METHOD SEED
-Writes models/ENV/METHOD/seedSEED/{model.safetensors,config.json} and plots/train/ENV-METHOD-seedSEED.csv.
+Usage: python pipeline/train.py ENV METHOD
+Writes models/ENV/METHOD/seedK/{model.safetensors,config.json} and plots/train/ENV-METHOD/seedK.csv.
 """
 
 import sys
@@ -13,6 +14,8 @@ pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 from hnsdt.cli import main  # noqa: E402
 
 if __name__ == "__main__":
-    if len(sys.argv) != 4:
-        sys.exit("usage: python pipeline/train.py ENV METHOD SEED")
-    sys.exit(main(["train", "--env", sys.argv[1], "--method", sys.argv[2], "--seed", sys.argv[3]]))
+    if len(sys.argv) != 3:
+        sys.exit("usage: python pipeline/train.py ENV METHOD")
+    env, method = sys.argv[1:]
+    sys.exit(main(["train", "--env", env, "--method", method, "--out", f"models/{env}/{method}",
+                   "--curves", f"plots/train/{env}-{method}"]))

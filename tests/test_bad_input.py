@@ -61,9 +61,9 @@ def workdir(tmp_path_factory):
     root = tmp_path_factory.mktemp("bad-input")
     (root / "params.yaml").write_text(yaml.safe_dump(small_params(), sort_keys=False))
     for args in (["collect", "--env", "keydoor", "--out", root / "data/datasets/keydoor", "--quiet"],
-                 ["train", "--env", "keydoor", "--method", "hnsdt", "--seed", "0", "--quiet",
-                  "--dataset", root / "data/datasets/keydoor", "--out", root / "models/keydoor/hnsdt/seed0",
-                  "--curve", root / "curve.csv"]):
+                 ["train", "--env", "keydoor", "--method", "hnsdt", "--quiet",
+                  "--dataset", root / "data/datasets/keydoor", "--out", root / "models/keydoor/hnsdt",
+                  "--curves", root / "curves"]):
         out = hnsdt(*args, cwd=root)
         assert out.returncode == 0, out.stderr[-2000:]
     return root
@@ -165,7 +165,7 @@ def test_bad_datasets(workdir, tmp_path, corrupt, match):
     corrupt(w / "data/datasets/keydoor")
     before = _outputs(w)
     out = hnsdt("train", "--env", "keydoor", "--method", "hnsdt", "--seed", "1", "--quiet", "--out", "m",
-                "--curve", "c.csv", "--dataset", w / "data/datasets/keydoor", cwd=w)
+                "--curves", "c", "--dataset", w / "data/datasets/keydoor", cwd=w)
     assert_one_error_line(out, match)
     assert _outputs(w) == before
 

@@ -42,3 +42,14 @@ def test_no_success_gives_missing_steps_not_zero():
     row = summary(t).iloc[0]
     assert row.success_mean == 0 and math.isnan(row.steps_mean)
     assert metrics_json(summary(t))["e"]["m"]["fail_0.1"]["steps_mean"] is None
+
+
+def test_seed_view_counts_solving_seeds_and_bootstraps_over_seeds():
+    from hnsdt.evaluation.report import seed_view
+
+    rows = [{"method": "dqn", "env": "e", "fail_prob": f, "seed": s, "success": s < 2, "steps": 30, "reward": 0.0}
+            for s in range(5) for f in (0.0, 0.3) for _ in range(4)]  # 2 of 5 seeds always succeed, 3 never
+    view = seed_view(pd.DataFrame(rows)).iloc[0]
+    assert (view.seeds, view.solved) == (5, 2) and view.success == pytest.approx(0.4)
+    assert 0.0 <= view.ci_low < 0.4 < view.ci_high <= 1.0
+    assert seed_view(pd.DataFrame(rows)).equals(seed_view(pd.DataFrame(rows)))  # seeded resampling

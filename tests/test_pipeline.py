@@ -31,8 +31,15 @@ def _set(repo: Path, section: str, key: str, value) -> None:
 
 
 @pytest.fixture(scope="module")
-def repo_copy(tmp_path_factory):
-    return make_tiny_repo(tmp_path_factory.mktemp("pipeline") / "repo")
+def repo_copies(tmp_path_factory):
+    """Two identical copies, made together: one runs uninterrupted, the other is killed and resumed."""
+    root = tmp_path_factory.mktemp("pipeline")
+    return make_tiny_repo(root / "repo"), make_tiny_repo(root / "killed")
+
+
+@pytest.fixture(scope="module")
+def repo_copy(repo_copies):
+    return repo_copies[0]
 
 
 @pytest.fixture(scope="module")
@@ -47,12 +54,12 @@ def test_repro_runs_everything_then_nothing_then_only_what_changed(repo_copy, fi
 
     ran = ran_stages(first_run[0])
     assert ran == {"collect@keydoor", "collect@multikeydoor", "evaluate", "report"} | {
-        f"{STAGES[m]}@{env}-{m}-0" for env in ("keydoor", "multikeydoor") for m in STAGES}
+        f"{STAGES[m]}@{env}-{m}" for env in ("keydoor", "multikeydoor") for m in STAGES}
     for env in ("keydoor", "multikeydoor"):
         assert open_dataset(repo_copy / "data/datasets" / env).meta.total_episodes == 9
         for method in STAGES:
             assert (repo_copy / f"models/{env}/{method}/seed0/model.safetensors").is_file()
-            assert (repo_copy / f"plots/train/{env}-{method}-seed0.csv").is_file()
+            assert (repo_copy / f"plots/train/{env}-{method}/seed0.csv").is_file()
     table = pd.read_csv(repo_copy / "results/episodes.csv", keep_default_na=False)
     assert len(table) == 7 * 2 * 2 * 1 * 4  # methods x envs x fail_probs x seeds x episodes
     metrics = json.loads((repo_copy / "results/metrics.json").read_text())
@@ -83,11 +90,11 @@ def test_repro_runs_everything_then_nothing_then_only_what_changed(repo_copy, fi
     # (the report reruns only if the evaluation's tables changed: they are the same bytes when 400 env steps
     # of DQN at another learning rate still act the same in the few evaluated episodes)
     assert ran_stages(run(["dvc", "repro"], repo_copy)) - {"report"} == {
-        "train_online@keydoor-dqn-0", "train_online@multikeydoor-dqn-0", "evaluate"}
+        "train_online@keydoor-dqn", "train_online@multikeydoor-dqn", "evaluate"}
 
     _set(repo_copy, "envs.keydoor", "max_steps", 60)
     assert ran_stages(run(["dvc", "repro"], repo_copy)) == {"collect@keydoor", "evaluate", "report"} | {
-        f"{STAGES[m]}@keydoor-{m}-0" for m in STAGES}
+        f"{STAGES[m]}@keydoor-{m}" for m in STAGES}
 
 
 def test_replay_points_to_an_evaluated_episode(repo_copy):
@@ -112,11 +119,11 @@ KILL_POINTS = {
 }
 
 
-def test_killed_runs_resume_to_the_same_outputs(tmp_path, first_run):
+def test_killed_runs_resume_to_the_same_outputs(tmp_path, repo_copies, first_run):
     """SIGKILL `dvc repro` during collect, during a training stage and during evaluate; each next run picks
     up cleanly, no half-written output is ever at its final path, and the outputs equal the uninterrupted
     run's, byte for byte (the .rrd recordings excepted: rerun's row ids are time-based)."""
-    repo = make_tiny_repo(tmp_path / "repo")
+    repo = repo_copies[1]
     env = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")  # the log as it happens
     for stage, (ready, final) in KILL_POINTS.items():
         log_path = tmp_path / f"{stage}.log"

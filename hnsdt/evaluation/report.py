@@ -247,9 +247,51 @@ def _cell(summ: pd.DataFrame, env: str, fail_prob: float, method: str, metric: s
     return r[f"{metric}_mean"].iloc[0], r[f"{metric}_std"].iloc[0]
 
 
-def claim_lines(summ: pd.DataFrame) -> tuple[list[str], list[dict]]:
+SOLVED = 0.9  # a training seed "solves" an env when it succeeds in at least this share of its episodes
+BOOTSTRAP = 10_000  # resamples of the seeds for the confidence intervals
+
+
+def seed_view(episodes: pd.DataFrame, seed: int = 0) -> pd.DataFrame:
+    """Per env × method: how many training seeds solve the env (success ≥ SOLVED over all its episodes, every
+    fail_prob) and a 95% percentile-bootstrap interval, over seeds, of the mean success. With few seeds an
+    online learner's mean hides a bimodal outcome; this says it in seeds, not in a mean."""
+    rng = np.random.default_rng(seed)
+    per_seed = episodes.groupby(["env", "method", "seed"], sort=True).success.mean().reset_index()
+    rows = []
+    for (env, method), g in per_seed.groupby(["env", "method"], sort=True):
+        x = g.success.to_numpy(np.float64)
+        means = x[rng.integers(0, len(x), (BOOTSTRAP, len(x)))].mean(axis=1)
+        rows.append({"env": env, "method": method, "seeds": len(x), "solved": int((x >= SOLVED).sum()),
+                     "success": float(x.mean()), "ci_low": float(np.quantile(means, 0.025)),
+                     "ci_high": float(np.quantile(means, 0.975))})
+    return pd.DataFrame(rows)
+
+
+def _seeds_phrase(view: pd.DataFrame | None, env: str, method: str) -> str:
+    if view is None or view.empty:
+        return ""
+    r = view[(view.env == env) & (view.method == method)]
+    if r.empty:
+        return ""
+    r = r.iloc[0]
+    return (f"; solves it in {r.solved} of {r.seeds} seeds, mean over seeds {r.success:.3f}, "
+            f"95% bootstrap CI [{r.ci_low:.3f}, {r.ci_high:.3f}]")
+
+
+def seed_lines(view: pd.DataFrame) -> list[str]:
+    lines = [f"| env | method | seeds that solve it (≥ {SOLVED:g} success) | mean success over seeds | "
+             "95% bootstrap CI over seeds |", "|---|---|---|---|---|"]
+    order = {m: i for i, m in enumerate(METHODS)}
+    view = view.sort_values(["env", "method"], key=lambda c: c.map(order) if c.name == "method" else c)
+    lines += [f"| {r.env} | {_label(r.method)} | {r.solved} of {r.seeds} | {r.success:.3f} | "
+              f"[{r.ci_low:.3f}, {r.ci_high:.3f}] |" for r in view.itertuples()]
+    return lines
+
+
+def claim_lines(summ: pd.DataFrame, view: pd.DataFrame | None = None) -> tuple[list[str], list[dict]]:
     """Where our measurements agree or disagree with the paper's claims, one row per claim. A point value
-    agrees when ours lies within two of the paper's standard deviations of the paper's mean."""
+    agrees when ours lies within two of the paper's standard deviations of the paper's mean. Claims about
+    learners whose seeds disagree also say how many seeds solve the env (``view``, from :func:`seed_view`)."""
     rows = []
     for env, fp, method, metric, mean, std in PAPER_POINTS:
         ours, ours_std = _cell(summ, env, fp, method, metric)
@@ -290,7 +332,8 @@ def claim_lines(summ: pd.DataFrame) -> tuple[list[str], list[dict]]:
         ours, _ = _cell(summ, "multikeydoor", 0.3, method)
         if ours is not None:
             rows.append({"claim": f"{_label(method)} collapses to near-zero success on multikeydoor at fail_prob 0.3",
-                         "paper": f"near zero (we read ≤ {NEAR_ZERO:g})", "ours": f"{ours:.3f}",
+                         "paper": f"near zero (we read ≤ {NEAR_ZERO:g})",
+                         "ours": f"{ours:.3f}{_seeds_phrase(view, 'multikeydoor', method)}",
                          "verdict": "agrees" if ours <= NEAR_ZERO else "disagrees"})
     low = [v for m in ("dqn", "pure_dt") if (v := _cell(summ, "multikeydoor", 0.3, m)[0]) is not None]
     high, _ = _cell(summ, "multikeydoor", 0.3, "hnsdt")
@@ -300,7 +343,8 @@ def claim_lines(summ: pd.DataFrame) -> tuple[list[str], list[dict]]:
             inside = max(low) < ours < high
             rows.append({"claim": f"{_label(method)} is intermediate on multikeydoor at fail_prob 0.3 (between "
                                   "DQN / pure DT and HNSDT)", "paper": "intermediate",
-                         "ours": f"{ours:.3f} (DQN / pure DT best {max(low):.3f}, HNSDT {high:.3f})",
+                         "ours": f"{ours:.3f} (DQN / pure DT best {max(low):.3f}, HNSDT {high:.3f})"
+                                 f"{_seeds_phrase(view, 'multikeydoor', method)}",
                          "verdict": "agrees" if inside else "disagrees"})
     table = paradigm_table(summ)
     for env in dict.fromkeys(summ.env):
@@ -416,7 +460,8 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
         comparison_figure(summ, tmp / "figures" / "comparison.png")
         heatmap_figure(summ, tmp / "figures" / "success_heatmap.png")
         paradigm_figure(summ, tmp / "figures" / "paradigms.png")
-        claims, claim_rows = claim_lines(summ)
+        view = seed_view(episodes)
+        claims, claim_rows = claim_lines(summ, view)
         usage = usage_lines(results)
         has_optimum = "regret" in summ
         if has_optimum:
@@ -458,6 +503,11 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
             *(["## Agreement with the paper's claims", "", *claims, "",
                 "The paper's own numbers come from its text (its figures are not in the source); a point value "
                 "agrees when ours is within two of the paper's standard deviations.", ""] if len(claims) > 2 else []),
+            "## Seeds that solve each environment", "", *seed_lines(view), "",
+            f"A seed solves an environment when it succeeds in at least {SOLVED:.0%} of its evaluated episodes "
+            f"(all failure probabilities). The interval resamples the training seeds {BOOTSTRAP:,} times "
+            "(percentile bootstrap, seeded): with 5 seeds and a learner that either solves a map or never does, "
+            "the mean alone hides that, and a different machine or seed set can move it by a whole seed.", "",
             *(["## Training data used", "", *usage, ""] if usage else []),
             "## Numbers", "", _table(summ) if has_optimum else _table(summ.assign(
                 success_ratio=np.nan, steps_ratio=np.nan, regret=np.nan)), "",
