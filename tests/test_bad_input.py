@@ -159,14 +159,21 @@ DATASET_CASES = {
 }
 
 
+TRAIN = ["train", "--env", "keydoor", "--method", "hnsdt", "--seed", "1", "--quiet", "--out", "m", "--curves", "c",
+         "--dataset", "data/datasets/keydoor"]
+
+
 @pytest.mark.parametrize("corrupt, match", DATASET_CASES.values(), ids=DATASET_CASES.keys())
 def test_bad_datasets(workdir, tmp_path, corrupt, match):
+    _run_corrupted(workdir, tmp_path, lambda w: corrupt(w / "data/datasets/keydoor"), TRAIN, match)
+
+
+def _run_corrupted(workdir: Path, tmp_path: Path, corrupt, command: list, match: str) -> None:
+    """Corrupt a private copy of the work folder, run the command there: one error line, nothing written."""
     w = _case_dir(workdir, tmp_path)
-    corrupt(w / "data/datasets/keydoor")
+    corrupt(w)
     before = _outputs(w)
-    out = hnsdt("train", "--env", "keydoor", "--method", "hnsdt", "--seed", "1", "--quiet", "--out", "m",
-                "--curves", "c", "--dataset", w / "data/datasets/keydoor", cwd=w)
-    assert_one_error_line(out, match)
+    assert_one_error_line(hnsdt(*command, cwd=w), match)
     assert _outputs(w) == before
 
 
@@ -196,12 +203,7 @@ CHECKPOINT_CASES = {
 
 @pytest.mark.parametrize("corrupt, match", CHECKPOINT_CASES.values(), ids=CHECKPOINT_CASES.keys())
 def test_bad_checkpoints(workdir, tmp_path, corrupt, match):
-    w = _case_dir(workdir, tmp_path)
-    corrupt(w / "models")
-    before = _outputs(w)
-    out = hnsdt(*EVALUATE, cwd=w)
-    assert_one_error_line(out, match)
-    assert _outputs(w) == before
+    _run_corrupted(workdir, tmp_path, lambda w: corrupt(w / "models"), EVALUATE, match)
 
 
 def test_replay_of_an_episode_that_does_not_exist(workdir, tmp_path):

@@ -50,7 +50,15 @@ def test_round_trip_through_stock_lerobot(small_dataset, multikeydoor):
     assert ds.meta.info.codebase_version == "v3.0"
     assert ds.features["observation.state"]["names"] == multikeydoor.state_names
     frame = ds[0]
-    assert frame["observation.state"].tolist() == [0, 0, 0, 0, 0, 0, 0, 0] or table.loc[0, "start"] == "random"
+    first = frame["observation.state"].tolist()
+    if table.loc[0, "start"] == "layout":
+        assert first == [*multikeydoor.start, *[0] * multikeydoor.n_flags]
+    else:  # a random start: a free cell that is not the exit, flags drawn at random (0/1)
+        assert tuple(first[:2]) in {tuple(c) for c in multikeydoor.free_cells()} - {multikeydoor.goal}
+        assert set(first[2:]) <= {0, 1}
+    from hnsdt.data.lerobot_io import FEATURE_DTYPES, dataset_features
+
+    assert {k: v["dtype"] for k, v in dataset_features(multikeydoor).items() if k in FEATURE_DTYPES} == FEATURE_DTYPES
     assert frame["task"] in json.loads((small_dataset / "meta/hnsdt.json").read_text())["subgoal_vocabulary"]
     # Frames are the collected transitions: each next state follows from the dynamics, tasks match sub-goal ids.
     vocab = json.loads((small_dataset / "meta/hnsdt.json").read_text())["subgoal_vocabulary"]

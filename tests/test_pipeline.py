@@ -65,6 +65,8 @@ def test_repro_runs_everything_then_nothing_then_only_what_changed(repo_copy, fi
     metrics = json.loads((repo_copy / "results/metrics.json").read_text())
     assert metrics["keydoor"]["symbolic"]["fail_0"]["success_mean"] == 1.0
     assert set(metrics["multikeydoor"]) == set(STAGES) | {"symbolic"}
+    shown = json.loads(run(["dvc", "metrics", "show", "--json"], repo_copy))  # declared as DVC metrics
+    assert json.dumps(shown).count("success_mean") >= 7 * 2 * 2
     usage = pd.read_csv(repo_copy / "results/training_usage.csv")
     assert set(usage[usage.training == "online"].env_steps) == {400}
     assert (usage[usage.training == "dataset"].dataset_frames > 0).all()

@@ -432,7 +432,8 @@ def theorem_sections(params: dict, results: Path, summ: pd.DataFrame, episodes: 
               f"{r.v_star:.4f} | {r.v_method:.4f} | {r.measured_regret:.4f} | {'yes' if r.holds else 'NO'} | "
               f"{_fmt(r.looseness, '.0f')} |" for r in t1.itertuples()]
     lines += ["", f"The bound holds in {int(t1.holds.sum())} of {len(t1)} cells. The 1/(1−γ)² factors make it "
-              "loose by orders of magnitude whenever ε_exec or ρ is non-zero.", "",
+              "loose by orders of magnitude whenever ε_exec or ρ is non-zero. A slightly negative measured regret "
+              "is sampling noise: V^HNSDT_γ is a mean over finitely many episodes, V*_γ an exact expectation.", "",
               "## Theorem 2, checked (PAC sub-goal completion)", "",
               f"m = fewest training segments of any operator in the plan, K = plan length, δ = {ts['delta']:g}, "
               f"d = {'the number of HNSDT parameters' if ts['vc_dimension'] == 'parameters' else ts['vc_dimension']} "

@@ -1,0 +1,76 @@
+"""How long the whole default pipeline takes, stage by stage: `dvc repro` in a fresh temporary copy of this repo
+(no datasets, models or lock file; this venv), timing each stage from DVC's own "Running stage" lines.
+
+Usage: python benchmarks/pipeline_time.py [--tiny] [--keep]
+--tiny uses the end-to-end test's tiny params instead of params.yaml. Prints the total and a table of stages,
+grouped by kind (collect, train, train_offline, train_online, evaluate, report), slowest first.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+
+from tiny_repo import BIN, copy_repo, run, tiny_params  # noqa: E402
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--tiny", action="store_true", help="the end-to-end test's tiny params")
+    parser.add_argument("--keep", action="store_true", help="keep the temporary copy")
+    args = parser.parse_args()
+    repo = Path(tempfile.mkdtemp(prefix="hnsdt-pipeline-time-")) / "repo"
+    repo.mkdir()
+    copy_repo(repo)
+    if args.tiny:
+        tiny_params(repo / "params.yaml")
+    run(["git", "init", "-q"], repo)
+    run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "add", "-A"], repo)
+    run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "copy"], repo)
+    env = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")
+    start = time.perf_counter()
+    marks: list[tuple[float, str]] = []
+    proc = subprocess.Popen(["dvc", "repro"], cwd=repo, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, bufsize=1)
+    tail: list[str] = []
+    for line in proc.stdout:
+        m = re.match(r"Running stage '([^']+)'", line)
+        if m:
+            marks.append((time.perf_counter() - start, m.group(1)))
+            print(f"[{marks[-1][0]:7.1f} s] {m.group(1)}", flush=True)
+        tail = (tail + [line])[-20:]
+    total = time.perf_counter() - start
+    if proc.wait() != 0:
+        print("".join(tail), file=sys.stderr)
+        return 1
+    ends = [t for t, _ in marks[1:]] + [total]
+    per_stage = [(name, end - t) for (t, name), end in zip(marks, ends)]
+    kinds: dict[str, list[float]] = defaultdict(list)
+    for name, secs in per_stage:
+        kinds[name.split("@")[0]].append(secs)
+    print(f"\ntotal: {total:.0f} s ({total / 60:.1f} min), {len(per_stage)} stages, {os.cpu_count()} cores")
+    print(f"{'stage kind':<14} {'instances':>9} {'seconds':>8} {'share':>6}")
+    for kind, secs in sorted(kinds.items(), key=lambda kv: -sum(kv[1])):
+        print(f"{kind:<14} {len(secs):>9} {sum(secs):>8.0f} {sum(secs) / total:>6.0%}")
+    print("\nslowest instances:")
+    for name, secs in sorted(per_stage, key=lambda x: -x[1])[:12]:
+        print(f"  {secs:7.1f} s  {name}")
+    if args.keep:
+        print(f"\nkept {repo}")
+    else:
+        shutil.rmtree(repo.parent, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
