@@ -21,7 +21,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
-from tiny_repo import BIN, copy_repo, run, tiny_params  # noqa: E402
+from tiny_repo import BIN, make_tiny_repo  # noqa: E402
 
 
 def main() -> int:
@@ -29,14 +29,7 @@ def main() -> int:
     parser.add_argument("--tiny", action="store_true", help="the end-to-end test's tiny params")
     parser.add_argument("--keep", action="store_true", help="keep the temporary copy")
     args = parser.parse_args()
-    repo = Path(tempfile.mkdtemp(prefix="hnsdt-pipeline-time-")) / "repo"
-    repo.mkdir()
-    copy_repo(repo)
-    if args.tiny:
-        tiny_params(repo / "params.yaml")
-    run(["git", "init", "-q"], repo)
-    run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "add", "-A"], repo)
-    run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "copy"], repo)
+    repo = make_tiny_repo(Path(tempfile.mkdtemp(prefix="hnsdt-pipeline-time-")) / "repo", tiny=args.tiny)
     env = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")
     start = time.perf_counter()
     marks: list[tuple[float, str]] = []

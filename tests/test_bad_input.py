@@ -87,7 +87,7 @@ PARAM_CASES = {
     "wrong type": ({"envs.keydoor.max_steps": "ten"}, COLLECT, "envs.keydoor.max_steps must be int"),
     "unknown top-level key": ({"colect": {"seed": 1}}, COLLECT, "unknown section(s) ['colect']"),
     "unknown behaviour key": ({"collect.behaviours.0.episods": 3}, COLLECT, "unknown keys ['episods']"),
-    "negative episodes": ({"collect.behaviours.0.episodes": -5}, COLLECT, "episodes"),
+    "negative episodes": ({"collect.behaviours.0.episodes": -5}, COLLECT, "episodes must be >= 0, got -5"),
     "fail_prob above 1": ({"collect.fail_probs": [0.1, 1.5]}, COLLECT, "collect.fail_probs"),
     "fail_prob below 0": ({"evaluate.fail_probs": [-0.1]}, EVALUATE, "evaluate.fail_probs"),
     "unknown env id": ({"envs.keydoor.id": "hnsdt/Nope-v0"}, COLLECT, "not a registered id"),
@@ -197,7 +197,7 @@ def _missing_seed(models: Path) -> None:
 CHECKPOINT_CASES = {
     "truncated safetensors": (_truncate_weights, "model.safetensors"),
     "config that does not match the weights": (_mismatched_config, "do not match"),
-    "missing seed": (_missing_seed, "missing"),
+    "missing seed": (_missing_seed, "seed0: missing model.safetensors"),
 }
 
 

@@ -113,10 +113,18 @@ def _tmp_under(folder: Path) -> bool:
     return folder.is_dir() and any(p.name.startswith(TMP_PREFIX) for p in folder.iterdir())
 
 
+def _inside_training(repo: Path, log: str) -> bool:
+    """A `train@` stage has started; a second later its process is importing or training, not yet saving."""
+    if "Running stage 'train@" not in log:
+        return False
+    time.sleep(1.0)
+    return True
+
+
 # (what to wait for before SIGKILL, the final output that must then not exist half-written)
 KILL_POINTS = {
     "collect": (lambda repo, log: _tmp_under(repo / "data/datasets"), "data/datasets/keydoor"),
-    "train": (lambda repo, log: "Running stage 'train@" in log and time.sleep(1.0) is None, None),
+    "train": (_inside_training, None),
     "evaluate": (lambda repo, log: _tmp_under(repo), "results"),
 }
 

@@ -53,11 +53,12 @@ def run(args, cwd, check: bool = True, env: dict | None = None) -> str:
     return out.stdout + out.stderr
 
 
-def make_tiny_repo(dst: Path) -> Path:
-    """A committed git repo at ``dst`` holding the project with tiny params."""
+def make_tiny_repo(dst: Path, tiny: bool = True) -> Path:
+    """A committed git repo at ``dst`` holding the project, with tiny params (or the default ones)."""
     dst.mkdir(parents=True)
     copy_repo(dst)
-    tiny_params(dst / "params.yaml")
+    if tiny:
+        tiny_params(dst / "params.yaml")
     run(["git", "init", "-q"], dst)
     run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "add", "-A"], dst)
     run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "copy",

@@ -39,12 +39,16 @@ import pandas as pd
 from hnsdt.envs.keydoor import GOAL_REWARD, STEP_REWARD
 
 
+def step_cost(steps, gamma: float) -> np.ndarray:
+    """Discounted cost of ``steps`` consecutive steps, |r_step|(1 − γⁿ)/(1 − γ), in reward units."""
+    return -STEP_REWARD * (1 - gamma ** np.asarray(steps, dtype=np.float64)) / (1 - gamma)
+
+
 def discounted_returns(steps, success, gamma: float) -> np.ndarray:
     """Each episode's discounted return, from its length and outcome (the reward is −0.1 a step, +1 more on
     the step that succeeds)."""
     steps = np.asarray(steps, dtype=np.float64)
-    step_part = STEP_REWARD * (1 - gamma**steps) / (1 - gamma)
-    return step_part + np.asarray(success, dtype=np.float64) * GOAL_REWARD * gamma ** (steps - 1)
+    return -step_cost(steps, gamma) + np.asarray(success, dtype=np.float64) * GOAL_REWARD * gamma ** (steps - 1)
 
 
 def optimal_operator_cost(optimal_steps, fail_prob: float, gamma: float, is_move) -> np.ndarray:
@@ -66,7 +70,7 @@ def theorem1(segments: pd.DataFrame, episodes: pd.DataFrame, v_star: dict, gamma
         ep = episodes[(episodes.method == method) & (episodes.env == env) & (episodes.fail_prob == fail_prob)]
         per_op = s.groupby("operator").agg(failure=("achieved", lambda a: 1.0 - a.mean()))
         done = s[s.achieved]
-        cost = -STEP_REWARD * (1 - gamma ** done.steps.to_numpy(np.float64)) / (1 - gamma)
+        cost = step_cost(done.steps, gamma)
         best = optimal_operator_cost(done.optimal_steps, fail_prob, gamma, done.operator.str.startswith("GoTo"))
         excess = pd.Series(cost - best, index=done.index).groupby(done.operator).mean()
         eps_exec = max(0.0, float(excess.max())) if len(excess) else float("nan")
