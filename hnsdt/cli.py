@@ -8,7 +8,6 @@ line and exit status 2.
 from __future__ import annotations
 
 import argparse
-import functools
 import sys
 from pathlib import Path
 
@@ -81,118 +80,37 @@ def cmd_collect(args) -> None:
     print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
 
 
-@functools.lru_cache(maxsize=2)
-def _frames(dataset: str):
-    """A dataset's frames, read once per process however many seeds train on it."""
-    from hnsdt.data.windows import load_frames
-
-    return load_frames(dataset)
-
-
-def _train_dt(params, args, seed: int, out: Path) -> tuple[list[dict], dict]:
-    from dataclasses import asdict, replace
-
-    import numpy as np
-
-    from hnsdt.config import model_config, train_settings
-    from hnsdt.evaluation.evaluate import LEARNED
-    from hnsdt.models.train import save_checkpoint, train_dt
-
-    ts = train_settings(params)
-    if args.method not in ts["methods"]:
-        raise ValueError(f"method {args.method!r} is not in train.methods {ts['methods']}")
-    model_cfg = model_config(params, args.env, LEARNED[args.method])
-    dataset = Path(args.dataset or f"data/datasets/{args.env}")
-    frames = _frames(str(dataset))
-    cfg = replace(ts["config"], seed=seed, behaviours=ts["behaviours"][args.method])
-    model, curve = train_dt(frames, model_cfg, cfg, progress=not args.quiet, desc=f"{args.method} seed {seed}")
-    starts = np.unique(frames.episode_start)
-    used = np.isin(frames.policy, list(cfg.behaviours)) if cfg.behaviours else np.ones(len(frames), bool)
-    usage = {"dataset_frames": int(used.sum()), "windows_seen": curve[-1]["windows_seen"],
-             "gradient_steps": curve[-1]["step"]}
-    save_checkpoint(model, out, {"env": args.env, "method": args.method, "seed": seed, "dataset": str(dataset),
-                                 "target_return": float(frames.returns_to_go[starts].max()),  # pure DT's target
-                                 "train": asdict(cfg), "usage": usage, "curve": curve})
-    return curve, usage
-
-
-def _train_baseline(params, args, seed: int, out: Path) -> tuple[list[dict], dict]:
-    from dataclasses import asdict
-
-    from hnsdt.config import baseline_lists, baseline_settings
-    from hnsdt.methods import METHODS
-    from hnsdt.models.checkpoint import save_checkpoint
-
-    kind = "offline" if METHODS[args.method].training == "dataset" else "online"
-    listed = baseline_lists(params)[kind]
-    if args.method not in listed:
-        raise ValueError(f"method {args.method!r} is not in baselines.{kind} {listed}")
-    bs = baseline_settings(params, args.method, args.env, seed)
-    desc = f"{args.method} seed {seed}"
-    extra = {"env": args.env, "method": args.method, "seed": seed}
-    if kind == "offline":
-        from hnsdt.agents.baselines.recurrent import train_recurrent
-
-        dataset = Path(args.dataset or f"data/datasets/{args.env}")
-        model, curve, usage = train_recurrent(_frames(str(dataset)), bs["model"], bs["train"],
-                                              progress=not args.quiet, desc=desc)
-        extra["dataset"] = str(dataset)
-    else:
-        if args.method == "dqn":
-            from hnsdt.agents.baselines.dqn import train_dqn as train
-        else:
-            from hnsdt.agents.baselines.options import train_options as train
-        env = bs["env"]
-        model, curve, usage = train(env["layout"], env["max_steps"], bs["model"], bs["train"],
-                                    progress=not args.quiet, desc=desc)
-    save_checkpoint(model, out, {**extra, "train": asdict(bs["train"]), "usage": usage, "curve": curve})
-    return curve, usage
-
-
 def cmd_train(args) -> None:
-    """Train one method on one env for every seed (train.seeds, or --seed): one process, so the imports and
-    the dataset load are paid once. Same seed, same weights, however the seeds are grouped (tested)."""
-    import pandas as pd
-
-    from hnsdt.config import env_settings, load_params, train_settings
-    from hnsdt.fileio import atomic_dir
-    from hnsdt.methods import DT_METHODS
+    """Train one method on one env for every seed (train.seeds, or --seed): one task per seed on the
+    executor of ``compute`` (or --executor/--workers). Same seed, same weights, whatever the executor and
+    however many workers (tested)."""
+    from hnsdt.config import compute_settings, env_settings, load_params, train_settings
+    from hnsdt.training import plan_runs, train_all
 
     params = load_params(args.params)
     ts = train_settings(params)
     if args.env not in ts["envs"]:
         raise ValueError(f"env {args.env!r} is not in train.envs {ts['envs']}")
     env_settings(params, args.env)
+    compute = compute_settings(params, args.executor, args.workers)
     seeds = args.seed if args.seed is not None else ts["seeds"]
     out = Path(args.out or f"models/{args.env}/{args.method}")
     curves = Path(args.curves or f"plots/train/{args.env}-{args.method}")
-    train = _train_dt if args.method in DT_METHODS else _train_baseline
-    with atomic_dir(out) as staging, atomic_dir(curves) as curve_staging:
-        staging.mkdir()
-        curve_staging.mkdir()
-        for seed in seeds:
-            curve, usage = train(params, args, seed, staging / f"seed{seed}")
-            pd.DataFrame(curve).to_csv(curve_staging / f"seed{seed}.csv", index=False)
-            facts = ", ".join(f"{k} {v}" for k, v in usage.items())
-            print(f"trained {args.method} on {args.env}, seed {seed}: {facts}; final {_last_metric(curve)}",
-                  flush=True)
+    runs = plan_runs(params, args.env, args.method, seeds, Path(args.dataset or f"data/datasets/{args.env}"))
+    train_all(runs, args.env, out, curves, compute, progress=not args.quiet)
     print(f"wrote {', '.join(f'seed{s}' for s in seeds)} -> {out}/ (curves: {curves}/)")
 
 
-def _last_metric(curve: list[dict]) -> str:
-    last = curve[-1] if curve else {}
-    return ", ".join(f"{k} {last[k]:.4f}" for k in ("loss", "success") if k in last and last[k] == last[k])
-
-
 def cmd_evaluate(args) -> None:
-    from hnsdt.config import env_settings, evaluate_settings, executor_config, load_params
+    from hnsdt.config import compute_settings, env_settings, evaluate_settings, executor_config, load_params
     from hnsdt.evaluation.evaluate import evaluate_all, summary
 
     params = load_params(args.params)
     settings = evaluate_settings(params)
     envs = {e: env_settings(params, e) for e in settings["envs"]}
+    compute = compute_settings(params, args.executor, args.workers)
     table = evaluate_all(settings, envs, executor_config(params), args.models, args.out, progress=not args.quiet,
-                         recordings_dir=args.recordings)
+                         recordings_dir=args.recordings, compute=compute)
     summ = summary(table)
     print(summ[["method", "env", "fail_prob", "success_mean", "steps_mean", "reward_mean"]].to_string(
         index=False, float_format=lambda v: f"{v:.3f}"))
@@ -252,6 +170,15 @@ LEARNED_NAMES = ("hnsdt", "pure_dt", "lstm_hier", "gru", "dqn", "options")  # = 
 # literal so `--help` does not import the library
 
 
+def _compute_arguments(p: argparse.ArgumentParser) -> None:
+    from hnsdt.executor import EXECUTORS
+
+    p.add_argument("--executor", choices=EXECUTORS, help="where the runs execute (default: compute.executor); "
+                   "ray connects to RAY_ADDRESS or starts a local instance. The outputs do not depend on it")
+    p.add_argument("--workers", type=int, help="local executor: runs at once (default: compute.workers; 0 = "
+                   "one per core)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="hnsdt", description="Hierarchical Neuro-Symbolic Decision Transformer: environments, symbolic "
@@ -294,6 +221,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--curves", help="training-curve folder, one seedK.csv per seed (default: "
                    "plots/train/ENV-METHOD)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    _compute_arguments(p)
     p.set_defaults(func=cmd_train)
 
     p = sub.add_parser("evaluate", help="evaluate every method x env x fail_prob x seed (the `evaluate` stage)")
@@ -301,6 +229,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="results", help="results folder (default: results)")
     p.add_argument("--recordings", help="episode recordings folder (default: recordings beside --out)")
     p.add_argument("--quiet", action="store_true")
+    _compute_arguments(p)
     p.set_defaults(func=cmd_evaluate)
 
     p = sub.add_parser("report", help="figures and report.md from the evaluation (the `report` stage)")

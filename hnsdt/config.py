@@ -17,7 +17,7 @@ LEARNED_METHODS = DT_METHODS  # the decision transformers, configured under `tra
 EVAL_METHODS = tuple(METHODS)
 
 
-SECTIONS = ("envs", "planner", "collect", "models", "train", "baselines", "evaluate", "logs", "theorems")
+SECTIONS = ("envs", "planner", "collect", "models", "train", "baselines", "evaluate", "logs", "theorems", "compute")
 
 
 class ParamsError(ValueError):
@@ -154,10 +154,11 @@ def model_config(params: dict, env_name: str, condition: str):
     sizes = {k: _get(params, f"models.{env_name}.{k}", int) for k in ("n_layers", "n_heads", "d_model", "context")}
     if min(sizes.values()) < 1:
         raise _fail(params, f"models.{env_name}: sizes must be positive, got {sizes}")
+    tokens = _get(params, f"models.{env_name}.tokens", str, "step")
     try:
         return DTConfig(condition=condition, n_flags=env["layout"].n_flags, grid_h=env["layout"].shape[0],
                         grid_w=env["layout"].shape[1], dropout=_get(params, "train.dropout", float, 0.1),
-                        max_timestep=env["max_steps"], **sizes)
+                        max_timestep=env["max_steps"], tokens=tokens, **sizes)
     except ValueError as e:
         raise _fail(params, f"models.{env_name}: {e}") from None
 
@@ -173,8 +174,7 @@ def train_settings(params: dict) -> dict:
         "seeds": _int_list(params, "train.seeds"),
         "config": TrainConfig(epochs=_get(params, "train.epochs", int), batch_size=_get(params, "train.batch_size", int),
                               lr=_get(params, "train.lr", float), max_steps=_get(params, "train.max_steps", int, 0),
-                              device=_get(params, "train.device", str, "auto"),
-                              threads=_get(params, "train.threads", int, 0)),
+                              device=_get(params, "train.device", str, "auto")),
     }
     behaviours = _get(params, "train.behaviours", dict, {})
     for method, names in behaviours.items():
@@ -183,8 +183,8 @@ def train_settings(params: dict) -> dict:
                         f"in {LEARNED_METHODS}; got {names!r}")
     out["behaviours"] = {m: tuple(behaviours.get(m, [])) for m in LEARNED_METHODS}
     cfg = out["config"]
-    if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.max_steps < 0 or cfg.threads < 0:
-        raise _fail(params, "train: epochs and batch_size must be >= 1, lr > 0, max_steps and threads >= 0")
+    if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.max_steps < 0:
+        raise _fail(params, "train: epochs and batch_size must be >= 1, lr > 0, max_steps >= 0")
     return out
 
 
@@ -285,6 +285,21 @@ def baseline_settings(params: dict, method: str, env_name: str, seed: int) -> di
         raise _fail(params, f"{key}: unknown keys {unknown}; expected some of {sorted(known)}")
     return {"method": method, "env": env, "model": _fill(params, key, net_cls, section, **net_fixed),
             "train": _fill(params, key, train_cls, section, **train_fixed), **extra}
+
+
+def compute_settings(params: dict, executor: str | None = None, workers: int | None = None):
+    """Where runs execute (``compute``), with command-line overrides; see :mod:`hnsdt.executor`."""
+    from hnsdt.executor import Compute
+
+    unknown = sorted(set(_get(params, "compute", dict, {})) - {"executor", "workers", "threads"})
+    if unknown:
+        raise _fail(params, f"compute: unknown keys {unknown}; expected some of ['executor', 'threads', 'workers']")
+    try:
+        return Compute(executor if executor is not None else _get(params, "compute.executor", str, "local"),
+                       workers if workers is not None else _get(params, "compute.workers", int, 0),
+                       _get(params, "compute.threads", int, 1))
+    except ValueError as e:
+        raise _fail(params, str(e)) from None
 
 
 def evaluate_settings(params: dict) -> dict:

@@ -31,6 +31,7 @@ METHODS = {m.name: m for m in (
 )}
 
 DT_METHODS = ("hnsdt", "pure_dt")  # decision transformers (stage `train`)
+DT_CONDITION = {"hnsdt": "subgoal", "pure_dt": "return"}  # what conditions each one (hnsdt.models.dt)
 OFFLINE_BASELINES = ("lstm_hier", "gru")  # recurrent behaviour cloning (stage `train_offline`)
 ONLINE_BASELINES = ("dqn", "options")  # reinforcement learning on the environment (stage `train_online`)
 LEARNED = DT_METHODS + OFFLINE_BASELINES + ONLINE_BASELINES

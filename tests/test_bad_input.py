@@ -96,6 +96,8 @@ PARAM_CASES = {
     "unknown executor mode": ({"planner.mode": "astar"}, COLLECT, "planner.mode must be one of"),
     "empty seed list": ({"train.seeds": []}, EVALUATE, "train.seeds"),
     "missing section": ({"collect": DELETE}, COLLECT, "missing key collect"),
+    "unknown executor": ({"compute.executor": "slurm"}, EVALUATE, "compute.executor must be one of"),
+    "zero threads": ({"compute.threads": 0}, EVALUATE, "threads >= 1"),
 }
 
 

@@ -2,6 +2,7 @@ import subprocess
 import sys
 
 import pytest
+import yaml
 
 from conftest import REPO
 
@@ -49,9 +50,10 @@ def test_bad_params_give_one_error_line_and_no_output(tmp_path, text, match):
 
 
 def test_unknown_behaviour_policy(tmp_path):
-    text = open(f"{REPO}/params.yaml").read().replace("policy: random", "policy: teleport")
+    params_dict = yaml.safe_load(open(f"{REPO}/params.yaml"))
+    params_dict["collect"]["behaviours"][0]["policy"] = "teleport"  # built in code, not by editing the text
     params = tmp_path / "params.yaml"
-    params.write_text(text)
+    params.write_text(yaml.safe_dump(params_dict))
     out = hnsdt("--params", str(params), "collect", "--env", "keydoor", "--out", str(tmp_path / "o"))
     assert out.returncode == 2 and "collect.behaviours[0].policy must be one of" in out.stderr
 

@@ -26,14 +26,17 @@ def _batch(cfg, B=3, seed=0):
             "returns": torch.randn(B, h, generator=g)}
 
 
+@pytest.mark.parametrize("tokens", ["step", "interleaved"])
 @pytest.mark.parametrize("condition", ["subgoal", "return"])
-def test_shapes_and_sequence_length(condition):
-    cfg = _cfg(condition)
+def test_shapes_and_sequence_length(condition, tokens):
+    cfg = _cfg(condition, tokens=tokens)
     model = DecisionTransformer(cfg).eval()
     b = _batch(cfg)
     logits = model(b["states"], b["actions"], b["timesteps"], b["pad"], **_cond(condition, b))
     assert logits.shape == (3, cfg.context, 5)
-    assert cfg.seq_len == (2 * 4 if condition == "subgoal" else 3 * 4 - 1)
+    expected = {("subgoal", "interleaved"): 2 * 4, ("return", "interleaved"): 3 * 4 - 1,
+                ("subgoal", "step"): 4 + 1, ("return", "step"): 4}  # step: the paper's h + 1 with the sub-goal
+    assert cfg.seq_len == expected[(condition, tokens)]
 
 
 def _cond(condition, b):
@@ -42,9 +45,10 @@ def _cond(condition, b):
     return {"returns": b["returns"]}
 
 
+@pytest.mark.parametrize("tokens", ["step", "interleaved"])
 @pytest.mark.parametrize("condition", ["subgoal", "return"])
-def test_causal_masking_future_steps_do_not_change_past_predictions(condition):
-    cfg = _cfg(condition)
+def test_causal_masking_future_steps_do_not_change_past_predictions(condition, tokens):
+    cfg = _cfg(condition, tokens=tokens)
     model = DecisionTransformer(cfg).eval()
     b = _batch(cfg)
     before = model(b["states"], b["actions"], b["timesteps"], b["pad"], **_cond(condition, b))
@@ -52,7 +56,8 @@ def test_causal_masking_future_steps_do_not_change_past_predictions(condition):
     b2["states"][:, -1] = (b2["states"][:, -1] + 1) % 2  # change only the last step's state and action
     b2["actions"][:, -2] = (b2["actions"][:, -2] + 1) % 5
     after = model(b2["states"], b2["actions"], b2["timesteps"], b2["pad"], **_cond(condition, b2))
-    assert torch.allclose(before[:, :-2], after[:, :-2], atol=1e-6)  # steps before the change: identical
+    # no step sees its own action (the label) or anything later: every step but the last is unchanged
+    assert torch.allclose(before[:, :-1], after[:, :-1], atol=1e-6)
     assert not torch.allclose(before[:, -1], after[:, -1])  # the changed step's prediction does move
 
 
@@ -65,8 +70,9 @@ def test_subgoal_token_conditions_every_prediction():
     assert not torch.allclose(a[:, 0], other[:, 0])
 
 
-def test_padded_steps_are_ignored_whatever_they_hold():
-    cfg = _cfg("subgoal")
+@pytest.mark.parametrize("tokens", ["step", "interleaved"])
+def test_padded_steps_are_ignored_whatever_they_hold(tokens):
+    cfg = _cfg("subgoal", tokens=tokens)
     model = DecisionTransformer(cfg).eval()
     b = _batch(cfg)
     b["pad"][:, :2] = True
@@ -119,7 +125,7 @@ def test_hnsdt_overfits_a_tiny_dataset_and_then_acts_optimally(keydoor):
 def test_same_seed_same_weights_and_checkpoint_round_trip(tmp_path, keydoor):
     frames = _expert_frames(keydoor, n=8)
     cfg = DTConfig("return", keydoor.n_flags, *keydoor.shape, context=4, n_layers=1, d_model=32, max_timestep=100)
-    tc = TrainConfig(epochs=1, max_steps=3, batch_size=16, seed=5, threads=1)
+    tc = TrainConfig(epochs=1, max_steps=3, batch_size=16, seed=5)
     a, _ = train_dt(frames, cfg, tc, progress=False)
     b, _ = train_dt(frames, cfg, tc, progress=False)
     for (k, va), vb in zip(a.state_dict().items(), b.state_dict().values()):

@@ -1,5 +1,9 @@
 """Evaluation: every method × env × fail_prob × seed, N episodes each, batched over environment copies.
 
+One task per method × env × seed (:func:`evaluate_run`) runs its fail_probs' cells and returns table rows,
+touching no file, so any executor (:mod:`hnsdt.executor`) can run it; :func:`evaluate_all` loads the
+checkpoints, runs the tasks and writes the tables and recordings.
+
 Metrics follow the paper: success rate, mean steps of the successful episodes, mean reward (episode return);
 each is computed per seed and then reported as mean ± std over seeds.
 """
@@ -7,6 +11,7 @@ each is computed per seed and then reported as mean ± std over seeds.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -17,10 +22,7 @@ from hnsdt.agents.rollout import Episode, rollout
 from hnsdt.agents.symbolic import SymbolicAgent
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv
-
-from hnsdt.methods import METHODS, method as lookup_method
-
-LEARNED = {"hnsdt": "subgoal", "pure_dt": "return"}  # decision transformer -> its conditioning
+from hnsdt.methods import method as lookup_method
 
 
 @dataclass
@@ -42,17 +44,25 @@ def checkpoint_dir(models_root: str | Path, env: str, method: str, seed: int) ->
     return Path(models_root) / env / method / f"seed{seed}"
 
 
-def make_agent(method: str, layout: Layout, executor: ExecutorConfig, models_root: str | Path, env: str,
-               seed: int, device: str = "cpu", epsilon: float = 0.0, agent_seed: int = 0):
-    """The batched agent of ``method`` for one env and training seed, loaded from its checkpoint.
-    ``epsilon`` and ``agent_seed`` only matter to the online baselines (ε-greedy noise, sampled options)."""
+def load_model(models_root: str | Path, env: str, method: str, seed: int, device: str = "cpu"):
+    """``(model, checkpoint meta)`` of a learned method's seed; ``(None, {})`` for the symbolic one."""
     if lookup_method(method).training == "none":
-        return SymbolicAgent(layout, executor)
+        return None, {}
     from hnsdt.models.checkpoint import load_checkpoint
 
-    model, meta = load_checkpoint(checkpoint_dir(models_root, env, method, seed), device)
+    path = checkpoint_dir(models_root, env, method, seed)
+    model, meta = load_checkpoint(path, device)
     if meta.get("method", method) != method:
-        raise ValueError(f"{checkpoint_dir(models_root, env, method, seed)} holds a {meta['method']} model")
+        raise ValueError(f"{path} holds a {meta['method']} model")
+    return model, meta
+
+
+def build_agent(method: str, layout: Layout, executor: ExecutorConfig, model=None, meta: dict | None = None,
+                epsilon: float = 0.0, agent_seed: int = 0):
+    """The batched agent of ``method`` around its trained ``model``. ``epsilon`` and ``agent_seed`` only
+    matter to the online baselines (ε-greedy noise, sampled options)."""
+    if lookup_method(method).training == "none":
+        return SymbolicAgent(layout, executor)
     if method == "hnsdt":
         from hnsdt.agents.dt_agents import HNSDTAgent
         return HNSDTAgent(layout, model, executor)
@@ -69,6 +79,13 @@ def make_agent(method: str, layout: Layout, executor: ExecutorConfig, models_roo
     return OptionsAgent(model, epsilon, agent_seed)
 
 
+def make_agent(method: str, layout: Layout, executor: ExecutorConfig, models_root: str | Path, env: str,
+               seed: int, device: str = "cpu", epsilon: float = 0.0, agent_seed: int = 0):
+    """:func:`build_agent` around the checkpoint of ``method``'s ``seed`` under ``models_root``."""
+    model, meta = load_model(models_root, env, method, seed, device)
+    return build_agent(method, layout, executor, model, meta, epsilon, agent_seed)
+
+
 def training_usage(models_root: str | Path, env: str, method: str, seed: int) -> dict:
     """What a learned model was trained on, from its checkpoint: env steps (online) or dataset frames."""
     import json
@@ -77,7 +94,7 @@ def training_usage(models_root: str | Path, env: str, method: str, seed: int) ->
     usage = meta.get("usage", {})
     return {"method": method, "env": env, "seed": seed, "training": lookup_method(method).training,
             "env_steps": usage.get("env_steps"), "dataset_frames": usage.get("dataset_frames"),
-            "gradient_steps": usage.get("gradient_steps")}
+            "epochs": usage.get("epochs"), "gradient_steps": usage.get("gradient_steps")}
 
 
 def cell_seed(cell: Cell, fail_index: int) -> int:
@@ -107,6 +124,13 @@ def episode_rows(cell: Cell, episodes: list[Episode], layout: Layout, plan_mode:
                        optimal_plan_cost=plan_cost(plan(layout, s0, "cost")))
         rows.append(row)
     return rows
+
+
+@lru_cache(maxsize=8)
+def _navigator(layout: Layout):
+    from hnsdt.agents.navigation import Navigator
+
+    return Navigator(layout)
 
 
 def segment_rows(cell: Cell, episodes: list[Episode], navigator) -> list[dict]:
@@ -201,53 +225,68 @@ def metrics_json(summ: pd.DataFrame) -> dict:
     return out
 
 
+def evaluate_run(method: str, env: str, seed: int, fail_probs: list[float], layout: Layout, max_steps: int,
+                 episodes: int, executor: ExecutorConfig, model, meta: dict, epsilon: float, log_episodes: int):
+    """The cells of one method × env × seed, one per fail_prob: for each, ``(episode rows, segment rows, its
+    first log_episodes episodes)``."""
+    out = []
+    for fi, fail_prob in enumerate(fail_probs):
+        cell = Cell(method, env, fail_prob, seed)
+        agent = build_agent(method, layout, executor, model, meta, epsilon, cell_seed(cell, fi) + 1)
+        eps = run_cell(cell, fi, layout, max_steps, episodes, agent)
+        out.append((episode_rows(cell, eps, layout, executor.plan_mode), segment_rows(cell, eps, _navigator(layout)),
+                    eps[:log_episodes]))
+    return out
+
+
 def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig, models_root: str | Path,
-                 out_dir: str | Path, progress: bool = True, recordings_dir: str | Path | None = None) -> pd.DataFrame:
-    """Run every cell, write ``episodes.csv``, ``summary.csv``, ``metrics.json`` under ``out_dir`` and the
-    episode recordings under ``recordings_dir`` (default: ``recordings`` beside ``out_dir``), each built in a
-    temporary folder and moved into place when complete.
+                 out_dir: str | Path, progress: bool = True, recordings_dir: str | Path | None = None,
+                 compute=None) -> pd.DataFrame:
+    """Run every cell on ``compute``'s executor, write ``episodes.csv``, ``summary.csv``, ``metrics.json``
+    under ``out_dir`` and the episode recordings (of the first seed) under ``recordings_dir`` (default:
+    ``recordings`` beside ``out_dir``), each built in a temporary folder and moved into place when complete.
 
     The recordings live apart from the tables because rerun stamps every row of an ``.rrd`` with a
     time-based id: the tables are the same bytes on every run, the ``.rrd`` files cannot be."""
     import json
 
-    from tqdm import tqdm
-
+    from hnsdt.executor import Compute, run_tasks
     from hnsdt.fileio import atomic_dir
     from hnsdt.logs import record_from_episode, write_mcap, write_rrd
 
-    from hnsdt.agents.navigation import Navigator
-
     out = Path(out_dir)
     rec_out = Path(recordings_dir) if recordings_dir is not None else out.parent / "recordings"
-    navigators = {e: Navigator(envs[e]["layout"]) for e in settings["envs"]}
+    groups = [(m, e, s) for m in settings["methods"] for e in settings["envs"] for s in settings["seeds"]]
+    tasks, params_count, usage = [], {}, []
+    for method, env, seed in groups:
+        model, meta = load_model(models_root, env, method, seed, settings["device"])
+        if model is not None:
+            params_count[f"{env}/{method}"] = sum(p.numel() for p in model.parameters())
+            usage.append(training_usage(models_root, env, method, seed))
+        log = settings["log_episodes"] if seed == settings["seeds"][0] else 0
+        tasks.append((method, env, seed, settings["fail_probs"], envs[env]["layout"], envs[env]["max_steps"],
+                      settings["episodes"], executor, model, meta, settings.get("eval_epsilon", {}).get(method, 0.0),
+                      log))
+    results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate", progress=progress)
     with atomic_dir(out) as tmp, atomic_dir(rec_out) as rec_tmp:
         tmp.mkdir()
         rec_tmp.mkdir()
-        rows, seg_rows, params_count, usage = [], [], {}, []
-        cells = [(m, e, fi, f, s) for m in settings["methods"] for e in settings["envs"]
-                 for fi, f in enumerate(settings["fail_probs"]) for s in settings["seeds"]]
-        for method, env, fi, fail_prob, seed in tqdm(cells, desc="evaluate", unit="cell", disable=not progress):
+        rows, seg_rows = [], []
+        cells = dict(zip(groups, results))
+        for method, env, fi, fail_prob, seed in [(m, e, fi, f, s) for m in settings["methods"] for e in settings["envs"]
+                                                 for fi, f in enumerate(settings["fail_probs"])
+                                                 for s in settings["seeds"]]:
+            cell_rows, cell_segs, logged = cells[(method, env, seed)][fi]
             cell = Cell(method, env, fail_prob, seed)
-            lay, max_steps = envs[env]["layout"], envs[env]["max_steps"]
-            agent = make_agent(method, lay, executor, models_root, env, seed, settings["device"],
-                               settings.get("eval_epsilon", {}).get(method, 0.0), cell_seed(cell, fi) + 1)
-            if hasattr(agent, "model"):
-                params_count[f"{env}/{method}"] = sum(p.numel() for p in agent.model.parameters())
-                if fi == 0:
-                    usage.append(training_usage(models_root, env, method, seed))
-            episodes = run_cell(cell, fi, lay, max_steps, settings["episodes"], agent)
-            cell_rows = episode_rows(cell, episodes, lay, executor.plan_mode)
-            seg_rows += segment_rows(cell, episodes, navigators[env])
-            if seed == settings["seeds"][0]:
-                for i in range(settings["log_episodes"]):
-                    rel = Path(method) / env / f"fp{fail_prob:g}" / f"seed{seed}" / f"ep{i}"
-                    rec = record_from_episode(cell.episode_id(i), lay, episodes[i], {"method": method})
-                    write_rrd(rec_tmp / rel.with_suffix(".rrd"), rec, episode_index=i)
-                    write_mcap(rec_tmp / rel.with_suffix(".mcap"), rec)
-                    cell_rows[i]["rrd"] = str(Path(rec_out.name) / rel.with_suffix(".rrd"))
-                    cell_rows[i]["mcap"] = str(Path(rec_out.name) / rel.with_suffix(".mcap"))
+            for i, ep in enumerate(logged):
+                rel = Path(method) / env / f"fp{fail_prob:g}" / f"seed{seed}" / f"ep{i}"
+                rec = record_from_episode(cell.episode_id(i), envs[env]["layout"], ep, {"method": method})
+                write_rrd(rec_tmp / rel.with_suffix(".rrd"), rec, episode_index=i)
+                write_mcap(rec_tmp / rel.with_suffix(".mcap"), rec)
+                cell_rows[i]["rrd"] = str(Path(rec_out.name) / rel.with_suffix(".rrd"))
+                cell_rows[i]["mcap"] = str(Path(rec_out.name) / rel.with_suffix(".mcap"))
             rows += cell_rows
+            seg_rows += cell_segs
         table = pd.DataFrame(rows)
         for col in ("rrd", "mcap"):
             if col not in table:
@@ -259,9 +298,9 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
             Path(settings["datasets"]) / e, e, settings["train_behaviours"])]
         pd.DataFrame(counts, columns=["env", "operator", "segments"]).to_csv(tmp / "training_segments.csv",
                                                                            index=False)
-        pd.DataFrame(usage, columns=["method", "env", "seed", "training", "env_steps", "dataset_frames",
+        pd.DataFrame(usage, columns=["method", "env", "seed", "training", "env_steps", "dataset_frames", "epochs",
                                      "gradient_steps"]).astype({"env_steps": "Int64", "dataset_frames": "Int64",
-                                                                "gradient_steps": "Int64"}).to_csv(
+                                                                "epochs": "float64", "gradient_steps": "Int64"}).to_csv(
             tmp / "training_usage.csv", index=False)
         (tmp / "model_parameters.json").write_text(json.dumps(params_count, indent=2, sort_keys=True) + "\n")
         summ = add_optimum(summary(table), envs)

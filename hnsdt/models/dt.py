@@ -1,13 +1,22 @@
-"""The decision transformer of Appendix C: a decoder-only causal transformer over (state, action) tokens.
+"""The decision transformer of Appendix C: a decoder-only causal transformer over a window of h steps.
 
 Two conditionings share one network:
 
-* ``condition="subgoal"`` (HNSDT): the window is ``[g, s_1, a_1, ..., s_h]`` where ``g = ψ(o)`` is one sub-goal
-  token (operator id + target cell, its own embeddings). Every state token predicts its action; the loss only
-  counts steps whose own sub-goal is ``g`` (a window that starts in an earlier operator's segment still gives
-  its history as context).
-* ``condition="return"`` (the pure DT baseline, as in the original decision transformer): the window is
-  ``[R_1, s_1, a_1, ..., R_h, s_h]`` with the return-to-go ``R_k`` as its own token; no sub-goals.
+* ``condition="subgoal"`` (HNSDT): one sub-goal token ``g = ψ(o)`` (operator id + target cell, its own
+  embeddings) leads the window. The loss only counts steps whose own sub-goal is ``g`` (a window that starts
+  in an earlier operator's segment still gives its history as context).
+* ``condition="return"`` (the pure DT baseline, as in the original decision transformer): each step also
+  carries its return-to-go ``R_k``; no sub-goals.
+
+Two token layouts (``tokens``):
+
+* ``"step"`` (default): one token per step, ``x_k = s_k + a_{k-1} (+ R_k)``, so a window is the paper's
+  "h + 1 tokens if one counts sub-goal embeddings" (Appendix C) — ``[g, x_1, ..., x_h]`` — and each ``x_k``
+  predicts ``a_k``. The previous action of a window's first step, and of an episode's first step, is a
+  learned "none" action. 2× (sub-goal) to 3× (return) fewer tokens than interleaving, which is where the
+  training and acting speed comes from (``benchmarks/dt_speed.py``).
+* ``"interleaved"``: Chen et al.'s layout, one token per element: ``[g, s_1, a_1, ..., s_h]`` or
+  ``[R_1, s_1, a_1, ..., R_h, s_h]``; every state token predicts its action.
 
 States are integer vectors (row, col, flags): row and column have embedding tables, flags a linear map. Every
 token of step k also gets the embedding of its episode timestep. The action head is a categorical over the 5
@@ -26,6 +35,8 @@ from hnsdt.symbolic.subgoals import VOCAB_SIZE
 
 N_ACTIONS = 5
 CONDITIONS = ("subgoal", "return")
+TOKEN_LAYOUTS = ("step", "interleaved")
+NO_ACTION = N_ACTIONS  # "step" layout: the previous action of a window's or an episode's first step
 
 
 @dataclass
@@ -41,22 +52,28 @@ class DTConfig:
     dropout: float = 0.1
     max_timestep: int = 256
     return_scale: float = 10.0  # returns-to-go are divided by this before embedding
+    tokens: str = "step"  # "step" = one token per step (state + previous action); "interleaved" = one per element
 
     def __post_init__(self):
         if self.condition not in CONDITIONS:
             raise ValueError(f"condition must be one of {CONDITIONS}, got {self.condition!r}")
+        if self.tokens not in TOKEN_LAYOUTS:
+            raise ValueError(f"tokens must be one of {TOKEN_LAYOUTS}, got {self.tokens!r}")
         if self.d_model % self.n_heads:
             raise ValueError(f"d_model {self.d_model} is not divisible by n_heads {self.n_heads}")
 
     @property
     def tokens_per_step(self) -> int:
+        if self.tokens == "step":
+            return 1
         return 2 if self.condition == "subgoal" else 3
 
     @property
     def seq_len(self) -> int:
         """Tokens in a window, without the final action (which is what is predicted)."""
         extra = 1 if self.condition == "subgoal" else 0
-        return extra + self.tokens_per_step * self.context - 1
+        last = 0 if self.tokens == "step" else 1  # interleaved windows drop the final action token
+        return extra + self.tokens_per_step * self.context - last
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -72,7 +89,7 @@ class DecisionTransformer(nn.Module):
         self.row_emb = nn.Embedding(cfg.grid_h, d)
         self.col_emb = nn.Embedding(cfg.grid_w, d)
         self.flag_proj = nn.Linear(max(cfg.n_flags, 1), d, bias=False)
-        self.action_emb = nn.Embedding(N_ACTIONS, d)
+        self.action_emb = nn.Embedding(N_ACTIONS + (cfg.tokens == "step"), d)  # + NO_ACTION
         self.time_emb = nn.Embedding(cfg.max_timestep + 1, d)
         if cfg.condition == "subgoal":
             self.subgoal_emb = nn.Embedding(VOCAB_SIZE, d)
@@ -106,12 +123,24 @@ class DecisionTransformer(nn.Module):
         B, h = actions.shape
         time = self.time_emb(timesteps.clamp(0, cfg.max_timestep))
         keep = (~pad)[..., None].float()
-        s_tok = (self.embed_states(states) + time + self.type_emb.weight[0]) * keep + self.pad_emb * (1 - keep)
-        a_tok = (self.action_emb(actions) + time + self.type_emb.weight[1]) * keep + self.pad_emb * (1 - keep)
         if cfg.condition == "subgoal":
             tgt = subgoal_targets + 1  # -1 (none) -> 0
             g = (self.subgoal_emb(subgoal_ids) + self.target_row_emb(tgt[:, 0]) + self.target_col_emb(tgt[:, 1])
                  + self.type_emb.weight[2])
+        if cfg.tokens == "step":
+            prev = torch.full_like(actions, NO_ACTION)
+            prev[:, 1:] = torch.where(pad[:, :-1], NO_ACTION, actions[:, :-1])
+            x = self.embed_states(states) + self.action_emb(prev) + time + self.type_emb.weight[0]
+            if cfg.condition == "return":
+                x = x + self.return_proj(returns[..., None] / cfg.return_scale)
+            seq = x * keep + self.pad_emb * (1 - keep)
+            if cfg.condition == "subgoal":
+                seq = torch.cat([g[:, None], seq], dim=1)
+            x = self.blocks(self.drop(seq), mask=self.causal_mask, is_causal=True)
+            return self.head(self.norm(x[:, seq.shape[1] - h:]))
+        s_tok = (self.embed_states(states) + time + self.type_emb.weight[0]) * keep + self.pad_emb * (1 - keep)
+        a_tok = (self.action_emb(actions) + time + self.type_emb.weight[1]) * keep + self.pad_emb * (1 - keep)
+        if cfg.condition == "subgoal":
             steps = torch.stack([s_tok, a_tok], dim=2).reshape(B, 2 * h, -1)
             seq = torch.cat([g[:, None], steps[:, :-1]], dim=1)  # drop the last action: it is the target
             state_pos = 1 + 2 * torch.arange(h, device=seq.device)

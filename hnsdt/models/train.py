@@ -1,7 +1,7 @@
 """Offline training of a decision transformer on a LeRobot dataset, and its checkpoints.
 
 Adam, batch of windows, a fixed number of epochs over the training windows; CUDA when available, CPU
-otherwise. Same seed on CPU ⇒ same weights. Checkpoints: :mod:`hnsdt.models.checkpoint`.
+otherwise. Same seed and thread count on CPU ⇒ same weights (the executor sets the threads). Checkpoints: :mod:`hnsdt.models.checkpoint`.
 """
 
 from __future__ import annotations
@@ -25,7 +25,6 @@ class TrainConfig:
     lr: float = 1e-3
     seed: int = 0
     device: str = "auto"  # "auto" = cuda if available, else cpu
-    threads: int = 0  # torch CPU threads; 0 = torch's default
     log_every: int = 10  # one training-curve row per this many steps
     behaviours: tuple[str, ...] = ()  # train on episodes of these collection behaviours (empty = all)
 
@@ -45,10 +44,11 @@ def _to_tensors(batch: dict, device: torch.device) -> dict:
 
 
 def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bool = True,
-             desc: str = "train") -> tuple[DecisionTransformer, list[dict]]:
-    """Train from scratch; returns the model (in eval mode) and the curve (mean loss every ``log_every``)."""
-    if cfg.threads:
-        torch.set_num_threads(cfg.threads)
+             desc: str = "train", on_epoch=None) -> tuple[DecisionTransformer, list[dict]]:
+    """Train from scratch; returns the model (in eval mode) and the curve (mean loss every ``log_every``).
+    ``on_epoch(epoch, step, model)``, if given, is called after each complete epoch and must not change the model
+    or draw random numbers (budget studies copy it: the model after e epochs of a longer run is the model of
+    an e-epoch run, as nothing here depends on the total)."""
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     device = pick_device(cfg.device)
@@ -88,6 +88,8 @@ def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bo
                 curve.append({"step": step, "epoch": epoch + 1, "windows_seen": seen,
                               "loss": float(np.mean(recent))})
                 recent = []
+        if on_epoch is not None and step == (epoch + 1) * steps_per_epoch:  # a complete epoch
+            on_epoch(epoch + 1, step, model)
     bar.close()
     model.eval()
     return model, curve

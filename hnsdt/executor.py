@@ -1,0 +1,96 @@
+"""Where the runs of a stage execute: worker processes on this machine, or a Ray cluster.
+
+A stage hands over independent tasks (one training seed; one method × env × seed of the evaluation), each a
+module-level function with its arguments, data included, that returns a picklable result and touches no
+file. The caller writes every output. Each task sets its own torch thread count (``compute.threads``) and
+results come back in task order, so the outputs are the same bytes whichever executor runs the tasks and
+however many workers share them (tested).
+
+* ``local`` (default): a pool of ``workers`` spawned processes (0 = one per core / threads); one worker runs
+  the tasks in this process.
+* ``ray``: one Ray task per run, ``num_cpus = threads``. Connects to ``RAY_ADDRESS`` when it is set (a
+  cluster whose nodes have this package installed at the same revision), otherwise starts a local Ray
+  instance. The pinned CPU settings travel in the tasks' runtime environment.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Any, Callable
+
+EXECUTORS = ("local", "ray")
+
+
+@dataclass(frozen=True)
+class Compute:
+    executor: str = "local"  # local | ray
+    workers: int = 0  # local: tasks at once (0 = one per available core / threads)
+    threads: int = 1  # torch CPU threads per task; part of the bytes
+
+    def __post_init__(self):
+        if self.executor not in EXECUTORS:
+            raise ValueError(f"compute.executor must be one of {EXECUTORS}, got {self.executor!r}")
+        if self.workers < 0 or self.threads < 1:
+            raise ValueError(f"compute: workers must be >= 0 and threads >= 1, got {self.workers}, {self.threads}")
+
+    def local_workers(self, n_tasks: int) -> int:
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+        return max(1, min(n_tasks, self.workers or cores // self.threads))
+
+
+def _call(fn: Callable, threads: int, args: tuple) -> Any:
+    import torch
+
+    if torch.get_num_threads() != threads:
+        torch.set_num_threads(threads)
+    return fn(*args)
+
+
+def run_tasks(fn: Callable, tasks: list[tuple], compute: Compute = Compute(), desc: str = "runs",
+              progress: bool = True) -> list:
+    """``[fn(*args) for args in tasks]``, computed by ``compute``'s executor; results in task order."""
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(tasks), desc=desc, unit="run", disable=not progress)
+    try:
+        if compute.executor == "ray":
+            return _run_ray(fn, tasks, compute, bar)
+        workers = compute.local_workers(len(tasks))
+        if workers == 1:
+            out = []
+            for args in tasks:
+                out.append(_call(fn, compute.threads, args))
+                bar.update(1)
+            return out
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        # spawn, not fork: a forked child would inherit torch's thread pools from this process.
+        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(_call, fn, compute.threads, args) for args in tasks]
+            for f in futures:
+                f.add_done_callback(lambda _: bar.update(1))
+            return [f.result() for f in futures]
+    finally:
+        bar.close()
+
+
+def _run_ray(fn: Callable, tasks: list[tuple], compute: Compute, bar) -> list:
+    try:
+        import ray
+    except ImportError:
+        raise RuntimeError("compute.executor is ray but Ray is not installed: pip install -e '.[ray]'") from None
+    from hnsdt.reproducible import PINNED_CPU
+
+    if not ray.is_initialized():
+        env = {k: os.environ.get(k, v) for k, v in PINNED_CPU.items()} | {"PYTHONHASHSEED": "0"}
+        ray.init(address=os.environ.get("RAY_ADDRESS"), runtime_env={"env_vars": env},
+                 include_dashboard=False, log_to_driver=False, configure_logging=False)
+    remote = ray.remote(num_cpus=compute.threads)(_call)
+    refs = [remote.remote(fn, compute.threads, args) for args in tasks]
+    pending = list(refs)
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1)
+        bar.update(len(done))
+    return ray.get(refs)

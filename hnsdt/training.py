@@ -1,0 +1,111 @@
+"""Training runs of the learned methods, one task per env × method × seed (stages `train`, `train_offline`,
+`train_online`).
+
+:func:`plan_runs` reads the params and the data once and returns one self-contained task per seed;
+:func:`train_run` is the task: it trains and returns the model and its facts, touching no file, so any
+executor (:mod:`hnsdt.executor`) can run it; :func:`train_all` runs the tasks and writes the checkpoints and
+curves.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+
+from hnsdt.methods import DT_CONDITION, DT_METHODS, METHODS
+
+
+def plan_runs(params: dict, env: str, method: str, seeds: list[int], dataset: Path) -> list[tuple]:
+    """One ``(method, seed, model_cfg, train_cfg, data, facts)`` per seed: ``data`` is the dataset's frames
+    (offline methods) or ``(layout, max_steps)`` (online ones); ``facts`` go into the checkpoint."""
+    from hnsdt.config import baseline_lists, baseline_settings, model_config, train_settings
+
+    training = METHODS[method].training
+    frames = None
+    if training == "dataset":
+        from hnsdt.data.windows import load_frames
+
+        frames = load_frames(dataset)  # read once, shipped to every seed's task
+    runs = []
+    if method in DT_METHODS:
+        ts = train_settings(params)
+        if method not in ts["methods"]:
+            raise ValueError(f"method {method!r} is not in train.methods {ts['methods']}")
+        model_cfg = model_config(params, env, DT_CONDITION[method])
+        starts = np.unique(frames.episode_start)
+        facts = {"dataset": str(dataset), "target_return": float(frames.returns_to_go[starts].max())}  # pure DT's
+        for seed in seeds:
+            cfg = replace(ts["config"], seed=seed, behaviours=ts["behaviours"][method])
+            runs.append((method, seed, model_cfg, cfg, frames, facts))
+        return runs
+    kind = "offline" if training == "dataset" else "online"
+    listed = baseline_lists(params)[kind]
+    if method not in listed:
+        raise ValueError(f"method {method!r} is not in baselines.{kind} {listed}")
+    for seed in seeds:
+        bs = baseline_settings(params, method, env, seed)
+        if kind == "offline":
+            data, facts = frames, {"dataset": str(dataset)}
+        else:
+            data, facts = (bs["env"]["layout"], bs["env"]["max_steps"]), {}
+        runs.append((method, seed, bs["model"], bs["train"], data, facts))
+    return runs
+
+
+def train_run(method: str, seed: int, model_cfg, train_cfg, data, facts: dict, progress: bool = False):
+    """Train one seed from scratch: ``(model, checkpoint facts, curve)``."""
+    desc = f"{method} seed {seed}"
+    if method in DT_METHODS:
+        from hnsdt.data.windows import window_ends
+        from hnsdt.models.train import train_dt
+
+        model, curve = train_dt(data, model_cfg, train_cfg, progress=progress, desc=desc)
+        used = np.isin(data.policy, list(train_cfg.behaviours)) if train_cfg.behaviours else np.ones(len(data), bool)
+        windows = len(window_ends(data, model_cfg.condition, train_cfg.behaviours))
+        usage = {"dataset_frames": int(used.sum()), "windows_seen": curve[-1]["windows_seen"],
+                 "gradient_steps": curve[-1]["step"], "epochs": round(curve[-1]["windows_seen"] / windows, 3)}
+    elif METHODS[method].training == "dataset":
+        from hnsdt.agents.baselines.recurrent import train_recurrent
+
+        model, curve, usage = train_recurrent(data, model_cfg, train_cfg, progress=progress, desc=desc)
+        usage["epochs"] = round(usage["frames_seen"] / usage["dataset_frames"], 3)
+    else:
+        if method == "dqn":
+            from hnsdt.agents.baselines.dqn import train_dqn as train
+        else:
+            from hnsdt.agents.baselines.options import train_options as train
+        layout, max_steps = data
+        model, curve, usage = train(layout, max_steps, model_cfg, train_cfg, progress=progress, desc=desc)
+    model.cpu()
+    return model, {"seed": seed, **facts, "train": asdict(train_cfg), "usage": usage, "curve": curve}, curve
+
+
+def train_all(runs: list[tuple], env: str, out: Path, curves: Path, compute, progress: bool = True) -> None:
+    """Run every seed's task on ``compute`` and write ``out/seedK/`` checkpoints and ``curves/seedK.csv``,
+    each folder complete or absent."""
+    import pandas as pd
+
+    from hnsdt.executor import run_tasks
+    from hnsdt.fileio import atomic_dir
+    from hnsdt.models.checkpoint import save_checkpoint
+
+    inline = compute.executor == "local" and compute.local_workers(len(runs)) == 1
+    method = runs[0][0]
+    results = run_tasks(train_run, [(*r, progress and inline) for r in runs], compute,
+                        desc=f"train {env} {method}", progress=progress and not inline)
+    with atomic_dir(out) as staging, atomic_dir(curves) as curve_staging:
+        staging.mkdir()
+        curve_staging.mkdir()
+        for run, (model, facts, curve) in zip(runs, results):
+            seed = run[1]
+            save_checkpoint(model, staging / f"seed{seed}", {"env": env, "method": method, **facts})
+            pd.DataFrame(curve).to_csv(curve_staging / f"seed{seed}.csv", index=False)
+            usage = ", ".join(f"{k} {v}" for k, v in facts["usage"].items())
+            print(f"trained {method} on {env}, seed {seed}: {usage}; final {_last_metric(curve)}", flush=True)
+
+
+def _last_metric(curve: list[dict]) -> str:
+    last = curve[-1] if curve else {}
+    return ", ".join(f"{k} {last[k]:.4f}" for k in ("loss", "success") if k in last and last[k] == last[k])
