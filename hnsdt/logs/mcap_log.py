@@ -10,9 +10,9 @@ import foxglove
 from foxglove.channels import LogChannel, RawImageChannel
 from foxglove.messages import Log, LogLevel, RawImage, Timestamp
 
-from hnsdt.fileio import atomic_file
 from hnsdt.envs.keydoor import ACTION_NAMES
 from hnsdt.envs.render import render_rgb
+from hnsdt.fileio import atomic_file
 from hnsdt.logs.record import EpisodeRecord
 from hnsdt.symbolic.subgoals import ID_TO_NAME
 
@@ -29,8 +29,7 @@ STEP_SCHEMA = {
 
 
 def write_mcap(path: str | Path, rec: EpisodeRecord) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path = Path(path)  # atomic_file creates the parent folder
     with atomic_file(path) as tmp:
         ctx = foxglove.Context()  # a context of its own, so channels never leak between files
         writer = foxglove.open_mcap(str(tmp), allow_overwrite=True, context=ctx)

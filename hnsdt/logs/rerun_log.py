@@ -43,8 +43,7 @@ def _plan_markdown(rec: EpisodeRecord) -> str:
 
 
 def write_rrd(path: str | Path, rec: EpisodeRecord, episode_index: int = 0) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    path = Path(path)  # atomic_file creates the parent folder
     # No wall clock in the file where rerun lets us leave it out: no start-time property, no `log_time`
     # timeline (rerun's row ids stay time-based, so the bytes still differ from run to run).
     stream = rr.RecordingStream("hnsdt", recording_id=rec.episode_id, send_properties=False)
