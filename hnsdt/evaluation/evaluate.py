@@ -79,13 +79,6 @@ def build_agent(method: str, layout: Layout, executor: ExecutorConfig, model=Non
     return OptionsAgent(model, epsilon, agent_seed)
 
 
-def make_agent(method: str, layout: Layout, executor: ExecutorConfig, models_root: str | Path, env: str,
-               seed: int, device: str = "cpu", epsilon: float = 0.0, agent_seed: int = 0):
-    """:func:`build_agent` around the checkpoint of ``method``'s ``seed`` under ``models_root``."""
-    model, meta = load_model(models_root, env, method, seed, device)
-    return build_agent(method, layout, executor, model, meta, epsilon, agent_seed)
-
-
 def training_usage(models_root: str | Path, env: str, method: str, seed: int) -> dict:
     """What a learned model was trained on, from its checkpoint: env steps (online) or dataset frames."""
     import json
