@@ -11,6 +11,11 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 from hnsdt.reproducible import pin_environment  # noqa: E402
 
 pin_environment()
+# One torch thread per test process, as the pipeline's runs use (compute.threads: 1): pytest-xdist runs one
+# test process per core instead. Idle OpenMP threads of the subprocesses sleep rather than spin, so processes
+# sharing the cores do not slow each other down (results do not depend on either setting's waiting policy).
+os.environ["OMP_NUM_THREADS"] = "1"
+os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
@@ -19,6 +24,12 @@ import hnsdt  # noqa: E402,F401  (registers the environments)
 from hnsdt.envs import load_layout  # noqa: E402
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def pytest_collection_modifyitems(items):
+    """Files with slow (end-to-end) tests first: the workers take whole files, so the longest start at once."""
+    slow_files = {item.path for item in items if item.get_closest_marker("slow")}
+    items.sort(key=lambda item: item.path not in slow_files)  # stable: file order otherwise unchanged
 
 
 @pytest.fixture(scope="session")

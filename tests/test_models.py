@@ -3,7 +3,7 @@ import pytest
 import torch
 
 from hnsdt.agents import SymbolicAgent, rollout
-from hnsdt.agents.dt_agents import History, HNSDTAgent
+from hnsdt.agents.dt_agents import History, HNSDTAgent, _greedy
 from hnsdt.data.windows import frames_from_arrays, make_windows, window_ends
 from hnsdt.envs import KeyDoorVectorEnv
 from hnsdt.models.dt import DecisionTransformer, DTConfig
@@ -109,6 +109,27 @@ def test_history_windows_equal_training_windows(keydoor):
         hist.record_action(np.array([0]), frames.actions[t : t + 1])
         if t + 1 < T:
             hist.push(np.array([0]), frames.states[t + 1 : t + 2])
+
+
+@pytest.mark.parametrize("condition", ["subgoal", "return"])
+def test_acting_runs_each_distinct_window_once_with_the_same_actions(condition):
+    """Agents send identical windows through the model once; every row gets the action of its own window."""
+    torch.manual_seed(0)
+    model = DecisionTransformer(_cfg(condition)).eval()
+    batch = _batch(model.cfg)
+    keys = ["states", "actions", "timesteps", "pad"] + (
+        ["subgoal_ids", "subgoal_targets"] if condition == "subgoal" else ["returns"])
+    order = [2, 0, 2, 1, 0, 2]  # duplicates, out of order
+    inputs = {k: batch[k].numpy()[order] for k in keys}
+    calls = []
+    hook = model.register_forward_hook(lambda module, args, logits: calls.append(len(logits)))
+    actions = _greedy(model, inputs)
+    hook.remove()
+    with torch.no_grad():
+        one_by_one = [model(**{k: torch.from_numpy(v[i : i + 1]) for k, v in inputs.items()})[0, -1].argmax().item()
+                      for i in range(len(order))]
+    assert actions.tolist() == one_by_one
+    assert calls == [3]  # one forward over the 3 distinct windows
 
 
 def test_hnsdt_overfits_a_tiny_dataset_and_then_acts_optimally(keydoor):

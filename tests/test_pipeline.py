@@ -1,7 +1,9 @@
 """The real DVC pipeline, end to end, on a tiny params override in a temporary copy of the repo."""
 
+import importlib.util
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -14,11 +16,12 @@ import yaml
 
 from hnsdt.fileio import TMP_PREFIX
 from hnsdt.methods import LEARNED, METHODS
-from tiny_repo import lock_outs, make_tiny_repo, ran_stages, run
+from tiny_repo import REPO, lock_outs, make_tiny_repo, ran_stages, run
 
-pytestmark = pytest.mark.slow
+pytestmark = pytest.mark.slow  # (pytest-xdist runs a file on one worker, in order: `--dist loadfile`)
 BIN = Path(sys.executable).parent
 STAGES = {m: METHODS[m].stage for m in LEARNED}  # learned method -> its DVC stage
+ENV = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")  # the log as it happens
 
 
 def _set(repo: Path, section: str, key: str, value) -> None:
@@ -30,48 +33,63 @@ def _set(repo: Path, section: str, key: str, value) -> None:
     (repo / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
 
 
-@pytest.fixture(scope="module")
-def repo_copies(tmp_path_factory):
-    """Two identical copies, made together: one runs uninterrupted, the other is killed and resumed."""
-    root = tmp_path_factory.mktemp("pipeline")
-    return make_tiny_repo(root / "repo"), make_tiny_repo(root / "killed")
+def _changed_stages(repo: Path) -> set[str]:
+    """The stages `dvc status` finds changed: their own code, params or inputs (not yet their upstream's)."""
+    out = subprocess.run(["dvc", "status", "--json"], cwd=repo, env=ENV, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    return set(json.loads(out.stdout))
+
+
+def _imports_by_stage(log: str) -> dict[str, set[str]]:
+    """``stage -> repo paths of the hnsdt modules its processes imported``, from a `dvc repro` log taken with
+    PYTHONPROFILEIMPORTTIME=1 (every Python process, pool workers included, lists its imports on stderr)."""
+    found: dict[str, set[str]] = {}
+    stage = None
+    for line in log.splitlines():
+        if m := re.search(r"Running stage '([^']+)'", line):
+            stage = m.group(1)
+            found[stage] = set()
+        elif stage and (m := re.search(r"import time:.*\|\s*(hnsdt(\.\w+)*)\s*$", line)):  # (after a progress bar)
+            origin = Path(importlib.util.find_spec(m.group(1)).origin)
+            found[stage].add(origin.relative_to(REPO).as_posix())
+    return found
 
 
 @pytest.fixture(scope="module")
-def repo_copy(repo_copies):
-    return repo_copies[0]
+def repo_copy(tmp_path_factory):
+    return make_tiny_repo(tmp_path_factory.mktemp("pipeline") / "repo")
 
 
 @pytest.fixture(scope="module")
 def first_run(repo_copy):
-    """The uninterrupted run: its log and the md5 of every output in its dvc.lock."""
-    log = run(["dvc", "repro"], repo_copy)
-    return log, lock_outs(repo_copy)
+    """The uninterrupted run: its log (with every process's imports) and the md5 of every output in dvc.lock."""
+    out = subprocess.run(["dvc", "repro"], cwd=repo_copy, env=dict(ENV, PYTHONPROFILEIMPORTTIME="1"), text=True,
+                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    assert out.returncode == 0, out.stdout[-5000:]
+    return out.stdout, lock_outs(repo_copy)
 
 
-def test_repro_runs_everything_then_nothing_then_only_what_changed(repo_copy, first_run):
+def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     from hnsdt.data.lerobot_io import open_dataset
 
     ran = ran_stages(first_run[0])
-    assert ran == {"collect@keydoor", "collect@multikeydoor", "evaluate", "report"} | {
-        f"{STAGES[m]}@{env}-{m}" for env in ("keydoor", "multikeydoor") for m in STAGES}
-    for env in ("keydoor", "multikeydoor"):
-        assert open_dataset(repo_copy / "data/datasets" / env).meta.total_episodes == 9
-        for method in STAGES:
-            assert (repo_copy / f"models/{env}/{method}/seed0/model.safetensors").is_file()
-            assert (repo_copy / f"plots/train/{env}-{method}/seed0.csv").is_file()
+    assert ran == {"collect@keydoor", "evaluate", "report"} | {f"{STAGES[m]}@keydoor-{m}" for m in STAGES}
+    assert open_dataset(repo_copy / "data/datasets/keydoor").meta.total_episodes == 9
+    for method in STAGES:
+        assert (repo_copy / f"models/keydoor/{method}/seed0/model.safetensors").is_file()
+        assert (repo_copy / f"plots/train/keydoor-{method}/seed0.csv").is_file()
     table = pd.read_csv(repo_copy / "results/episodes.csv", keep_default_na=False)
-    assert len(table) == 7 * 2 * 2 * 1 * 4  # methods x envs x fail_probs x seeds x episodes
+    assert len(table) == 7 * 1 * 2 * 1 * 4  # methods x envs x fail_probs x seeds x episodes
     metrics = json.loads((repo_copy / "results/metrics.json").read_text())
     assert metrics["keydoor"]["symbolic"]["fail_0"]["success_mean"] == 1.0
-    assert set(metrics["multikeydoor"]) == set(STAGES) | {"symbolic"}
+    assert set(metrics["keydoor"]) == set(STAGES) | {"symbolic"}
     shown = json.loads(run(["dvc", "metrics", "show", "--json"], repo_copy))  # declared as DVC metrics
-    assert json.dumps(shown).count("success_mean") >= 7 * 2 * 2
+    assert json.dumps(shown).count("success_mean") >= 7 * 1 * 2
     usage = pd.read_csv(repo_copy / "results/training_usage.csv")
     assert set(usage[usage.training == "online"].env_steps) == {400}
     assert (usage[usage.training == "dataset"].dataset_frames > 0).all()
     recorded = table[table.rrd != ""]
-    assert len(recorded) == 7 * 2 * 2 and all((repo_copy / p).is_file() for p in recorded.mcap)
+    assert len(recorded) == 7 * 1 * 2 and all((repo_copy / p).is_file() for p in recorded.mcap)
     report = (repo_copy / "report/report.md").read_text()
     lock = yaml.safe_load((repo_copy / "dvc.lock").read_text())
     dataset_md5 = lock["stages"]["collect@keydoor"]["outs"][0]["md5"]
@@ -85,18 +103,28 @@ def test_repro_runs_everything_then_nothing_then_only_what_changed(repo_copy, fi
     status = run(["git", "status", "--porcelain", "--untracked-files=all"], repo_copy).splitlines()
     assert {line[3:] for line in status} == {"dvc.lock"}, status
 
-    _set(repo_copy, "evaluate", "episodes", 5)
-    assert ran_stages(run(["dvc", "repro"], repo_copy)) == {"evaluate", "report"}
 
-    _set(repo_copy, "baselines.dqn", "lr", 0.001)  # one method's knob: only its instances retrain
-    # (the report reruns only if the evaluation's tables changed: they are the same bytes when 400 env steps
-    # of DQN at another learning rate still act the same in the few evaluated episodes)
-    assert ran_stages(run(["dvc", "repro"], repo_copy)) - {"report"} == {
-        "train_online@keydoor-dqn", "train_online@multikeydoor-dqn", "evaluate"}
-
-    _set(repo_copy, "envs.keydoor", "max_steps", 60)
-    assert ran_stages(run(["dvc", "repro"], repo_copy)) == {"collect@keydoor", "evaluate", "report"} | {
-        f"{STAGES[m]}@keydoor-{m}" for m in STAGES}
+def test_every_stage_depends_on_the_code_it_runs(repo_copy, first_run):
+    """Every hnsdt module that a stage's processes import is among its DVC deps (the file, or a folder holding
+    it), so an edit to it reruns the stage; and, for real, editing one module marks the stages that import it."""
+    imports = _imports_by_stage(first_run[0])
+    lock = yaml.safe_load((repo_copy / "dvc.lock").read_text())["stages"]
+    assert imports.keys() == lock.keys()
+    for stage, modules in imports.items():
+        deps = [d["path"].rstrip("/") for d in lock[stage]["deps"]]
+        missing = {m for m in modules if not any(m == d or m.startswith(d + "/") for d in deps)}
+        assert not missing, f"stage {stage} runs {sorted(missing)} but does not depend on it"
+    module = repo_copy / "hnsdt/data/lerobot_io.py"
+    readers = {stage for stage, modules in imports.items() if "hnsdt/data/lerobot_io.py" in modules}
+    assert "collect@keydoor" in readers and "train_online@keydoor-dqn" not in readers
+    original = module.read_bytes()
+    module.write_bytes(original + b"\n# edited\n")
+    try:
+        changed = _changed_stages(repo_copy)
+    finally:
+        module.write_bytes(original)
+    assert readers <= changed and "train_online@keydoor-dqn" not in changed
+    assert _changed_stages(repo_copy) == set()
 
 
 def test_replay_points_to_an_evaluated_episode(repo_copy):
@@ -121,25 +149,27 @@ def _inside_training(repo: Path, log: str) -> bool:
     return True
 
 
-# (what to wait for before SIGKILL, the final output that must then not exist half-written)
+# stage run again and SIGKILLed: (what to wait for before the kill, the output that must then not exist);
+# downstream first, so each forced run still finds its inputs
 KILL_POINTS = {
-    "collect": (lambda repo, log: _tmp_under(repo / "data/datasets"), "data/datasets/keydoor"),
-    "train": (_inside_training, None),
     "evaluate": (lambda repo, log: _tmp_under(repo), "results"),
+    "train@keydoor-hnsdt": (_inside_training, None),
+    "collect@keydoor": (lambda repo, log: _tmp_under(repo / "data/datasets"), "data/datasets/keydoor"),
 }
 
 
-def test_killed_runs_resume_to_the_same_outputs(tmp_path, repo_copies, first_run):
-    """SIGKILL `dvc repro` during collect, during a training stage and during evaluate; each next run picks
-    up cleanly, no half-written output is ever at its final path, and the outputs equal the uninterrupted
-    run's, byte for byte (the .rrd recordings excepted: rerun's row ids are time-based)."""
-    repo = repo_copies[1]
-    env = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")  # the log as it happens
+def test_killed_runs_resume_to_the_same_outputs(tmp_path, repo_copy, first_run):
+    """SIGKILL `dvc repro --force` of the evaluate, a training and a collect stage while they run; no
+    half-written output is ever at its final path, and the next run of each (forced: `dvc repro` alone would
+    restore the outputs from DVC's cache instead of computing them) cleans up after the killed one and writes
+    the uninterrupted run's outputs, byte for byte (the .rrd recordings excepted: rerun's row ids are
+    time-based)."""
+    repo = repo_copy
     for stage, (ready, final) in KILL_POINTS.items():
         log_path = tmp_path / f"{stage}.log"
         with open(log_path, "w") as log:
-            proc = subprocess.Popen(["dvc", "repro"], cwd=repo, env=env, stdout=log, stderr=subprocess.STDOUT,
-                                    start_new_session=True)
+            proc = subprocess.Popen(["dvc", "repro", "--force", "--single-item", stage], cwd=repo, env=ENV,
+                                    stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
         deadline = time.monotonic() + 300
         while not ready(repo, log_path.read_text()):
             assert proc.poll() is None, f"dvc repro ended before reaching {stage}:\n{log_path.read_text()[-2000:]}"
@@ -150,10 +180,31 @@ def test_killed_runs_resume_to_the_same_outputs(tmp_path, repo_copies, first_run
         assert f"Running stage '{stage}" in log_path.read_text()
         if final:
             assert not (repo / final).exists(), f"half-written {final} after a kill during {stage}"
-    run(["dvc", "repro"], repo)
+    for stage in reversed(KILL_POINTS):  # upstream first
+        assert ran_stages(run(["dvc", "repro", "--force", "--single-item", stage], repo)) == {stage}
     assert not list(repo.rglob(f"{TMP_PREFIX}*")), "temporaries of killed writes were not cleaned up"
     status = run(["git", "status", "--porcelain", "--untracked-files=all"], repo).splitlines()
     assert {line[3:] for line in status} == {"dvc.lock"}, status
     outs, reference = lock_outs(repo), first_run[1]
     assert outs.keys() == reference.keys()
     assert {k for k in outs if outs[k] != reference[k]} <= {"evaluate:recordings"}
+
+
+def test_a_changed_knob_reruns_only_the_stages_that_read_it(repo_copy, first_run):
+    _set(repo_copy, "evaluate", "episodes", 5)
+    assert ran_stages(run(["dvc", "repro"], repo_copy)) == {"evaluate", "report"}
+    params = (repo_copy / "params.yaml").read_text()
+
+    _set(repo_copy, "baselines.dqn", "lr", 0.001)  # one method's knob: only its instances retrain
+    assert _changed_stages(repo_copy) == {"train_online@keydoor-dqn"}
+    (repo_copy / "params.yaml").write_text(params)
+
+    _set(repo_copy, "envs.keydoor", "max_steps", 60)  # one env's knob: everything on that env
+    assert _changed_stages(repo_copy) == {"collect@keydoor", "evaluate"} | {
+        f"{STAGES[m]}@keydoor-{m}" for m in STAGES}
+
+
+def test_the_lock_file_holds_exactly_the_pipelines_stages():
+    """No stale entries in this repository's dvc.lock (the report cites it for provenance)."""
+    listed = {line.split()[0] for line in run(["dvc", "stage", "list"], REPO).splitlines() if line.strip()}
+    assert set(yaml.safe_load((REPO / "dvc.lock").read_text())["stages"]) == listed

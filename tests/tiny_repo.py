@@ -29,8 +29,11 @@ def copy_repo(dst: Path) -> None:
 
 
 def tiny_params(path: Path) -> None:
-    """Every stage runs, each in seconds: 9 episodes per dataset, 1 seed, a few gradient / env steps."""
+    """Every stage kind runs, each in seconds: Case 1 only (Case 2 runs the same stages with another layout),
+    9 episodes, 1 seed, a few gradient / env steps."""
     params = yaml.safe_load(path.read_text())
+    params["envs"] = {"keydoor": params["envs"]["keydoor"]}
+    params["train"]["envs"] = ["keydoor"]
     params["collect"]["fail_probs"] = [0.1]
     for b in params["collect"]["behaviours"]:
         b["episodes"] = 3
