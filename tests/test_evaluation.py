@@ -53,3 +53,26 @@ def test_seed_view_counts_solving_seeds_and_bootstraps_over_seeds():
     assert (view.seeds, view.solved) == (5, 2) and view.success == pytest.approx(0.4)
     assert 0.0 <= view.ci_low < 0.4 < view.ci_high <= 1.0
     assert seed_view(pd.DataFrame(rows)).equals(seed_view(pd.DataFrame(rows)))  # seeded resampling
+
+
+def test_the_report_revision_is_dirty_for_code_changes_not_for_the_lock_file(tmp_path):
+    import subprocess
+
+    from hnsdt.evaluation.report import git_revision
+
+    def git(*args):
+        subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=tmp_path, check=True,
+                       capture_output=True)
+
+    (tmp_path / "sub").mkdir()
+    for name in ("dvc.lock", "params.yaml", "sub/code.py"):
+        (tmp_path / name).write_text("a\n")
+    git("init", "-q")
+    git("add", "-A")
+    git("commit", "-qm", "x")
+    rev = git_revision(tmp_path)
+    assert len(rev) == 12
+    (tmp_path / "dvc.lock").write_text("b\n")  # what `dvc repro` does while the report stage runs
+    assert git_revision(tmp_path) == git_revision(tmp_path / "sub") == rev
+    (tmp_path / "params.yaml").write_text("b\n")
+    assert git_revision(tmp_path / "sub") == rev + "-dirty"

@@ -95,6 +95,7 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     dataset_md5 = lock["stages"]["collect@keydoor"]["outs"][0]["md5"]
     rev = run(["git", "rev-parse", "--short=12", "HEAD"], repo_copy).strip()
     assert dataset_md5 in report and "figures/comparison.png" in report and f"`{rev}" in report
+    assert f"{rev}-dirty" not in report  # the run rewrote dvc.lock, nothing else
     assert (repo_copy / "report/figures/success_heatmap.png").stat().st_size > 10_000
     assert "figures/paradigms.png" in report and "Agreement with the paper's claims" in report
 

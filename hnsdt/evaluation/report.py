@@ -39,8 +39,10 @@ def git_revision(cwd: str | Path = ".") -> str:
                              check=True).stdout.strip()
     except (subprocess.CalledProcessError, FileNotFoundError):
         return "unknown (not a git checkout with commits)"
-    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd, capture_output=True,
-                           text=True).stdout.strip()
+    # dvc.lock does not count: `dvc repro` rewrites it after every stage, this one included
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ":(top)",
+                            ":(top,exclude)dvc.lock"],
+                           cwd=cwd, capture_output=True, text=True).stdout.strip()
     return rev + ("-dirty" if dirty else "")
 
 
