@@ -104,13 +104,15 @@ def cmd_train(args) -> None:
 def cmd_evaluate(args) -> None:
     from hnsdt.config import compute_settings, env_settings, evaluate_settings, executor_config, load_params
     from hnsdt.evaluation.evaluate import evaluate_all, summary
+    from hnsdt.provenance import git_revision, params_digest
 
     params = load_params(args.params)
     settings = evaluate_settings(params)
     envs = {e: env_settings(params, e) for e in settings["envs"]}
     compute = compute_settings(params, args.executor, args.workers)
+    provenance = {"git_revision": git_revision(), "params_digest": params_digest(params)}  # into each recording
     table = evaluate_all(settings, envs, executor_config(params), args.models, args.out, progress=not args.quiet,
-                         recordings_dir=args.recordings, compute=compute)
+                         recordings_dir=args.recordings, compute=compute, provenance=provenance)
     summ = summary(table)
     print(summ[["method", "env", "fail_prob", "success_mean", "steps_mean", "reward_mean"]].to_string(
         index=False, float_format=lambda v: f"{v:.3f}"))

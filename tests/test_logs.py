@@ -1,6 +1,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 from mcap.reader import make_reader
@@ -23,19 +24,36 @@ def _rows(path):
     return counts
 
 
-def test_rrd_reads_back_with_every_step(tmp_path, keydoor):
+def test_rrd_reads_back_with_every_step_labelled_and_verified(tmp_path, keydoor):
+    from hnsdt.logs.rerun_log import CLASS_ID, cell_classes
+
     ep = _episode(keydoor)
-    rec = record_from_episode("symbolic/keydoor/fp0.2/seed0/ep0", keydoor, ep)
+    meta = {"method": "symbolic", "env": "keydoor", "fail_prob": 0.2, "seed": 0, "git_revision": "abc"}
+    rec = record_from_episode("symbolic/keydoor/fp0.2/seed0/ep0", keydoor, ep, meta)
     path = write_rrd(tmp_path / "ep.rrd", rec)
     reader = RrdReader(str(path))
     assert reader.recordings()[0].recording_id == "symbolic/keydoor/fp0.2/seed0/ep0"
     assert len(reader.blueprints()) == 1  # opens laid out
     rows = _rows(path)
-    assert rows["/grid"] == ep.length + 1  # every state, the final one included
+    assert rows["/grid/cells"] == rows["/grid/agent"] == ep.length + 1  # every state, the final one included
     assert rows["/reward/step"] == rows["/reward/cumulative"] == ep.length
     assert rows["/plan"] == 1 and rows["/subgoal"] == len(ep.segments)
+    assert rows["/events"] == ep.length + len(ep.segments) + 1  # actions, sub-goal changes, the outcome
+    chunks = {c.entity_path: c.to_record_batch() for c in reader.store().stream().to_chunks()}
+    props = {name: col.to_pylist()[0] for name, col in zip(chunks["/__properties/episode"].schema.names,
+                                                          chunks["/__properties/episode"].columns)}
+    assert {k: props[k] for k in meta} == {k: [v] for k, v in meta.items()} and props["success"] == [ep.success]
+    legend = {c["class_description"]["info"]["label"] for c in chunks["/grid"].column(1).to_pylist()[0][0]}
+    assert legend == {"floor", "wall", "exit", "key", "door (locked)", "door (open)", "item", "agent"}
     summary = str(reader.store().summary())
     assert "episode" in summary and "step" in summary  # both timelines
+    # the cells: walls where the layout has walls, the key until it is picked up
+    first = cell_classes(keydoor, ep.states[0], cell_px=1)
+    assert ((first == CLASS_ID["wall"]) == keydoor.walls).all()
+    assert first[next(iter(keydoor.keys.values()))] == CLASS_ID["key"]
+    verify = subprocess.run([str(Path(sys.executable).parent / "rerun"), "rrd", "verify", str(path)],
+                            capture_output=True, text=True)
+    assert verify.returncode == 0 and "verified without error" in verify.stdout + verify.stderr
 
 
 def test_mcap_reads_back_with_foxglove_schemas_and_json_steps(tmp_path, keydoor):

@@ -234,7 +234,7 @@ def evaluate_run(method: str, env: str, seed: int, fail_probs: list[float], layo
 
 def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig, models_root: str | Path,
                  out_dir: str | Path, progress: bool = True, recordings_dir: str | Path | None = None,
-                 compute=None) -> pd.DataFrame:
+                 compute=None, provenance: dict | None = None) -> pd.DataFrame:
     """Run every cell on ``compute``'s executor, write ``episodes.csv``, ``summary.csv``, ``metrics.json``
     under ``out_dir`` and the episode recordings (of the first seed) under ``recordings_dir`` (default:
     ``recordings`` beside ``out_dir``), each built in a temporary folder and moved into place when complete.
@@ -273,7 +273,8 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
             cell = Cell(method, env, fail_prob, seed)
             for i, ep in enumerate(logged):
                 rel = Path(method) / env / f"fp{fail_prob:g}" / f"seed{seed}" / f"ep{i}"
-                rec = record_from_episode(cell.episode_id(i), envs[env]["layout"], ep, {"method": method})
+                meta = {"method": method, "env": env, "fail_prob": fail_prob, "seed": seed, "episode": i}
+                rec = record_from_episode(cell.episode_id(i), envs[env]["layout"], ep, meta | (provenance or {}))
                 write_rrd(rec_tmp / rel.with_suffix(".rrd"), rec, episode_index=i)
                 write_mcap(rec_tmp / rel.with_suffix(".mcap"), rec)
                 cell_rows[i]["rrd"] = str(Path(rec_out.name) / rel.with_suffix(".rrd"))

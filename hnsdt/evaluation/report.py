@@ -6,9 +6,7 @@ came from, as recorded in ``dvc.lock`` by the stages that produced them.
 
 from __future__ import annotations
 
-import hashlib
 import json
-import subprocess
 from pathlib import Path
 
 import matplotlib
@@ -21,6 +19,7 @@ import yaml  # noqa: E402
 
 from hnsdt.fileio import atomic_dir  # noqa: E402
 from hnsdt.methods import METHODS, PARADIGMS  # noqa: E402
+from hnsdt.provenance import git_revision, params_digest  # noqa: E402
 
 METHOD_LABELS = {name: m.label for name, m in METHODS.items()}
 METRICS = [("success", "success rate"), ("steps", "steps (successful episodes)"), ("reward", "average reward")]
@@ -31,24 +30,6 @@ def _style(i: int, n: int) -> dict:
     """Distinct marker and line per method, and a small x offset so identical curves stay visible."""
     marker, line = STYLES[i % len(STYLES)]
     return {"marker": marker, "linestyle": line, "capsize": 3, "offset": 0.004 * (i - (n - 1) / 2)}
-
-
-def git_revision(cwd: str | Path = ".") -> str:
-    try:
-        rev = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=cwd, capture_output=True, text=True,
-                             check=True).stdout.strip()
-    except (subprocess.CalledProcessError, FileNotFoundError):
-        return "unknown (not a git checkout with commits)"
-    # dvc.lock does not count: `dvc repro` rewrites it after every stage, this one included
-    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ":(top)",
-                            ":(top,exclude)dvc.lock"],
-                           cwd=cwd, capture_output=True, text=True).stdout.strip()
-    return rev + ("-dirty" if dirty else "")
-
-
-def params_digest(params: dict) -> str:
-    clean = {k: v for k, v in params.items() if not k.startswith("_")}
-    return hashlib.sha256(json.dumps(clean, sort_keys=True).encode()).hexdigest()[:16]
 
 
 def lock_outputs(lock_path: str | Path = "dvc.lock") -> dict[str, str]:

@@ -1,4 +1,7 @@
-"""An episode as a rerun recording (.rrd) that opens laid out: grid, plan, sub-goal and events, rewards."""
+"""An episode as a rerun recording (.rrd) that opens laid out and explains itself: the grid as labelled cells
+(an annotation context gives every class its name and colour, so the viewer shows a legend and hover labels),
+the agent, the plan, the active sub-goal, events and rewards; recording properties say which method, env,
+fail_prob, seed and episode it is, and from which code revision and params."""
 
 from __future__ import annotations
 
@@ -9,10 +12,49 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from hnsdt.envs.keydoor import ACTION_NAMES
+from hnsdt.envs.layout import Layout
+from hnsdt.envs.render import CELL_PX, COLOURS, split_state
 from hnsdt.fileio import atomic_file
-from hnsdt.envs.render import render_rgb
 from hnsdt.logs.record import EpisodeRecord
 from hnsdt.symbolic.subgoals import ID_TO_NAME
+
+
+# class id (0 is rerun's "nothing") -> name; colours as in the gymnasium rendering
+CLASSES = {i: name for i, name in enumerate(COLOURS, start=1)}
+CLASS_ID = {name: i for i, name in CLASSES.items()}
+LABELS = {"goal": "exit", "door_closed": "door (locked)", "door_open": "door (open)"}
+ANNOTATIONS = rr.AnnotationContext([rr.AnnotationInfo(id=i, label=LABELS.get(name, name), color=COLOURS[name])
+                                    for i, name in CLASSES.items()])
+
+
+def cell_classes(layout: Layout, state: np.ndarray, cell_px: int = CELL_PX) -> np.ndarray:
+    """(H*px, W*px) class ids of the world's cells in ``state`` (the agent is drawn on top, separately)."""
+    _, keys, doors, items = split_state(layout, state)
+    ids = np.where(layout.walls, CLASS_ID["wall"], CLASS_ID["floor"]).astype(np.uint8)
+    objects = [(layout.goal, "goal")]
+    objects += [(rc, "key") for k, rc in layout.keys.items() if k not in keys]
+    objects += [(rc, "door_open" if d in doors else "door_closed") for d, rc in layout.doors.items()]
+    objects += [(rc, "item") for i, rc in layout.items.items() if i not in items]
+    for rc, name in objects:
+        ids[rc] = CLASS_ID[name]
+    return np.repeat(np.repeat(ids, cell_px, axis=0), cell_px, axis=1)
+
+
+def _agent(state: np.ndarray, cell_px: int = CELL_PX) -> rr.Points2D:
+    centre = [(int(state[1]) + 0.5) * cell_px, (int(state[0]) + 0.5) * cell_px]  # (x, y)
+    return rr.Points2D([centre], radii=0.35 * cell_px, class_ids=[CLASS_ID["agent"]])
+
+
+def recording_properties(rec: EpisodeRecord) -> dict:
+    """What the recording is: its episode id, outcome and the record's metadata (method, env, fail_prob,
+    seed, git revision, params digest ... as the caller gave them)."""
+    props = {"episode_id": rec.episode_id, "success": bool(rec.success), "steps": int(rec.length),
+             "return": float(np.sum(rec.rewards))}
+    for key, value in rec.meta.items():
+        if value is None or (isinstance(value, float) and np.isnan(value)):
+            continue
+        props[key] = value.item() if hasattr(value, "item") else value
+    return props
 
 
 def blueprint() -> rrb.Blueprint:
@@ -56,27 +98,38 @@ def write_rrd(path: str | Path, rec: EpisodeRecord, episode_index: int = 0) -> P
 def _log_episode(stream: rr.RecordingStream, tmp: Path, rec: EpisodeRecord, episode_index: int) -> None:
     stream.save(str(tmp))
     stream.send_blueprint(blueprint())
-    stream.set_time("episode", sequence=episode_index)
-    stream.set_time("step", sequence=0)
+    stream.send_recording_name(rec.episode_id)
+    stream.send_property("episode", rr.AnyValues(**recording_properties(rec)))
+    stream.log("grid", ANNOTATIONS, static=True)
     stream.log("plan", rr.TextDocument(_plan_markdown(rec), media_type=rr.MediaType.MARKDOWN), static=True)
-    cum = 0.0
-    prev = None
-    for t in range(rec.length):
+    stream.set_time("episode", sequence=episode_index)
+    states = rec.states[: rec.length + 1]  # with the state after the last action, when recorded
+    for t, state in enumerate(states):
         stream.set_time("step", sequence=t)
-        stream.log("grid", rr.Image(render_rgb(rec.layout, rec.states[t])))
-        name = ID_TO_NAME[int(rec.subgoal_ids[t])]
-        if name != prev:
-            stream.log("subgoal", rr.TextDocument(f"**{name}**", media_type=rr.MediaType.MARKDOWN))
-            stream.log("events", rr.TextLog(f"sub-goal -> {name}", level="INFO"))
-            prev = name
-        stream.log("events", rr.TextLog(f"action {ACTION_NAMES[int(rec.actions[t])]}", level="DEBUG"))
-        cum += float(rec.rewards[t])
-        stream.log("reward/step", rr.Scalars(float(rec.rewards[t])))
-        stream.log("reward/cumulative", rr.Scalars(cum))
-    if len(rec.states) > rec.length:  # the state after the last action
-        stream.set_time("step", sequence=rec.length)
-        stream.log("grid", rr.Image(render_rgb(rec.layout, rec.states[rec.length])))
-        stream.log("events", rr.TextLog("success" if rec.success else "episode ended without success",
-                                        level="INFO" if rec.success else "WARN"))
+        stream.log("grid/cells", rr.SegmentationImage(cell_classes(rec.layout, state)))
+        stream.log("grid/agent", _agent(state))
+    # per-step series in one call each (rows on the `episode` and `step` timelines)
+    steps = np.arange(rec.length)
+    times = [rr.TimeColumn("episode", sequence=np.full(rec.length, episode_index)),
+             rr.TimeColumn("step", sequence=steps)]
+    rewards = np.asarray(rec.rewards, dtype=np.float64)
+    stream.send_columns("reward/step", indexes=times, columns=rr.Scalars.columns(scalars=rewards))
+    stream.send_columns("reward/cumulative", indexes=times, columns=rr.Scalars.columns(scalars=np.cumsum(rewards)))
+    names = [ID_TO_NAME[int(i)] for i in rec.subgoal_ids[: rec.length]]
+    changes = [t for t in range(rec.length) if t == 0 or names[t] != names[t - 1]]
+    change_times = [rr.TimeColumn("episode", sequence=np.full(len(changes), episode_index)),
+                    rr.TimeColumn("step", sequence=changes)]
+    stream.send_columns("subgoal", indexes=change_times, columns=rr.TextDocument.columns(
+        text=[f"**{names[t]}**" for t in changes], media_type=[rr.MediaType.MARKDOWN] * len(changes)))
+    events = [(t, f"sub-goal -> {names[t]}", "INFO") for t in changes]
+    events += [(t, f"action {ACTION_NAMES[int(a)]}", "DEBUG") for t, a in enumerate(rec.actions[: rec.length])]
+    if len(states) > rec.length:
+        events.append((rec.length, "success" if rec.success else "episode ended without success",
+                       "INFO" if rec.success else "WARN"))
+    events.sort(key=lambda e: e[0])  # stable: a step's sub-goal change before its action
+    stream.send_columns("events", indexes=[
+        rr.TimeColumn("episode", sequence=np.full(len(events), episode_index)),
+        rr.TimeColumn("step", sequence=[t for t, _, _ in events])],
+        columns=rr.TextLog.columns(text=[m for _, m, _ in events], level=[lv for _, _, lv in events]))
     stream.flush()
     stream.disconnect()

@@ -1,0 +1,29 @@
+"""Where an output came from: the git revision of the code and a digest of the params that made it (cited by
+the report and stamped into every episode recording)."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import subprocess
+from pathlib import Path
+
+
+def git_revision(cwd: str | Path = ".") -> str:
+    """The checked-out commit (12 hex digits), ``-dirty`` when tracked files differ from it."""
+    try:
+        rev = subprocess.run(["git", "rev-parse", "--short=12", "HEAD"], cwd=cwd, capture_output=True, text=True,
+                             check=True).stdout.strip()
+    except (subprocess.CalledProcessError, FileNotFoundError):
+        return "unknown (not a git checkout with commits)"
+    # dvc.lock does not count: `dvc repro` rewrites it after every stage, this one included
+    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ":(top)",
+                            ":(top,exclude)dvc.lock"],
+                           cwd=cwd, capture_output=True, text=True).stdout.strip()
+    return rev + ("-dirty" if dirty else "")
+
+
+def params_digest(params: dict) -> str:
+    """16 hex digits of the params' canonical JSON (keys starting with ``_`` are bookkeeping, left out)."""
+    clean = {k: v for k, v in params.items() if not k.startswith("_")}
+    return hashlib.sha256(json.dumps(clean, sort_keys=True).encode()).hexdigest()[:16]
