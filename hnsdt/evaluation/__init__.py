@@ -1,0 +1,1 @@
+"""Evaluation of every method x env x fail_prob x seed (evaluate), the theorem checks and the report."""
