@@ -25,7 +25,7 @@ def _rows(path):
 
 
 def test_rrd_reads_back_with_every_step_labelled_and_verified(tmp_path, keydoor):
-    from hnsdt.logs.rerun_log import CLASS_ID, cell_classes
+    from hnsdt.envs.render import CLASS_ID, cell_classes
 
     ep = _episode(keydoor)
     meta = {"method": "symbolic", "env": "keydoor", "fail_prob": 0.2, "seed": 0, "git_revision": "abc"}

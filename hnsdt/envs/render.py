@@ -50,26 +50,32 @@ def render_ansi(layout: Layout, state: np.ndarray) -> str:
     return "\n".join("".join(row) for row in symbol_grid(layout, state)) + "\n"
 
 
+# class id (0 = nothing, as rerun's segmentation images expect) -> what a cell shows; the agent is drawn on top
+CLASSES = {i: name for i, name in enumerate(COLOURS, start=1)}
+CLASS_ID = {name: i for i, name in CLASSES.items()}
+_PALETTE = np.array([(0, 0, 0), *COLOURS.values()], dtype=np.uint8)  # class id -> colour
+
+
+def cell_classes(layout: Layout, state: np.ndarray, cell_px: int = 1) -> np.ndarray:
+    """(H*px, W*px) class ids of the world's cells in ``state``: walls, keys and items not yet picked up, doors
+    (closed or open), the goal; the agent is not among them (it stands on one of these cells)."""
+    _, keys, doors, items = split_state(layout, state)
+    ids = np.where(layout.walls, CLASS_ID["wall"], CLASS_ID["floor"]).astype(np.uint8)
+    objects = [(layout.goal, "goal")]
+    objects += [(rc, "key") for k, rc in layout.keys.items() if k not in keys]
+    objects += [(rc, "door_open" if d in doors else "door_closed") for d, rc in layout.doors.items()]
+    objects += [(rc, "item") for i, rc in layout.items.items() if i not in items]
+    for rc, name in objects:
+        ids[rc] = CLASS_ID[name]
+    return np.repeat(np.repeat(ids, cell_px, axis=0), cell_px, axis=1)
+
+
 def render_rgb(layout: Layout, state: np.ndarray, cell_px: int = CELL_PX) -> np.ndarray:
-    """An (H*px, W*px, 3) uint8 image: walls, keys, doors (dark closed, pale open), items, goal and agent."""
-    cell, keys, doors, items = split_state(layout, state)
-    h, w = layout.shape
-    img = np.empty((h, w, 3), dtype=np.uint8)
-    img[:] = COLOURS["floor"]
-    img[layout.walls] = COLOURS["wall"]
-    img[layout.goal] = COLOURS["goal"]
-    for k, rc in layout.keys.items():
-        if k not in keys:
-            img[rc] = COLOURS["key"]
-    for d, rc in layout.doors.items():
-        img[rc] = COLOURS["door_open" if d in doors else "door_closed"]
-    for i, rc in layout.items.items():
-        if i not in items:
-            img[rc] = COLOURS["item"]
-    big = np.repeat(np.repeat(img, cell_px, axis=0), cell_px, axis=1)
+    """An (H*px, W*px, 3) uint8 image: the cells in their colours and the agent as a disc."""
+    big = _PALETTE[cell_classes(layout, state, cell_px)]
     # The agent is a filled disc so the cell underneath (key, door, goal) stays visible at its corners.
     yy, xx = np.mgrid[0:cell_px, 0:cell_px]
     disc = (yy - cell_px / 2 + 0.5) ** 2 + (xx - cell_px / 2 + 0.5) ** 2 <= (cell_px * 0.35) ** 2
-    r0, c0 = cell[0] * cell_px, cell[1] * cell_px
+    r0, c0 = int(state[0]) * cell_px, int(state[1]) * cell_px
     big[r0 : r0 + cell_px, c0 : c0 + cell_px][disc] = COLOURS["agent"]
     return big

@@ -12,32 +12,15 @@ import rerun as rr
 import rerun.blueprint as rrb
 
 from hnsdt.envs.keydoor import ACTION_NAMES
-from hnsdt.envs.layout import Layout
-from hnsdt.envs.render import CELL_PX, COLOURS, split_state
+from hnsdt.envs.render import CELL_PX, CLASS_ID, CLASSES, COLOURS, cell_classes
 from hnsdt.fileio import atomic_file
 from hnsdt.logs.record import EpisodeRecord
 from hnsdt.symbolic.subgoals import ID_TO_NAME
 
 
-# class id (0 is rerun's "nothing") -> name; colours as in the gymnasium rendering
-CLASSES = {i: name for i, name in enumerate(COLOURS, start=1)}
-CLASS_ID = {name: i for i, name in CLASSES.items()}
 LABELS = {"goal": "exit", "door_closed": "door (locked)", "door_open": "door (open)"}
 ANNOTATIONS = rr.AnnotationContext([rr.AnnotationInfo(id=i, label=LABELS.get(name, name), color=COLOURS[name])
                                     for i, name in CLASSES.items()])
-
-
-def cell_classes(layout: Layout, state: np.ndarray, cell_px: int = CELL_PX) -> np.ndarray:
-    """(H*px, W*px) class ids of the world's cells in ``state`` (the agent is drawn on top, separately)."""
-    _, keys, doors, items = split_state(layout, state)
-    ids = np.where(layout.walls, CLASS_ID["wall"], CLASS_ID["floor"]).astype(np.uint8)
-    objects = [(layout.goal, "goal")]
-    objects += [(rc, "key") for k, rc in layout.keys.items() if k not in keys]
-    objects += [(rc, "door_open" if d in doors else "door_closed") for d, rc in layout.doors.items()]
-    objects += [(rc, "item") for i, rc in layout.items.items() if i not in items]
-    for rc, name in objects:
-        ids[rc] = CLASS_ID[name]
-    return np.repeat(np.repeat(ids, cell_px, axis=0), cell_px, axis=1)
 
 
 def _agent(state: np.ndarray, cell_px: int = CELL_PX) -> rr.Points2D:
@@ -95,6 +78,13 @@ def write_rrd(path: str | Path, rec: EpisodeRecord, episode_index: int = 0) -> P
     return path
 
 
+def _times(episode_index: int, steps) -> list[rr.TimeColumn]:
+    """Index columns for rows at ``steps`` of this episode (both timelines)."""
+    steps = np.asarray(list(steps), dtype=np.int64)
+    return [rr.TimeColumn("episode", sequence=np.full(len(steps), episode_index)),
+            rr.TimeColumn("step", sequence=steps)]
+
+
 def _log_episode(stream: rr.RecordingStream, tmp: Path, rec: EpisodeRecord, episode_index: int) -> None:
     stream.save(str(tmp))
     stream.send_blueprint(blueprint())
@@ -106,20 +96,16 @@ def _log_episode(stream: rr.RecordingStream, tmp: Path, rec: EpisodeRecord, epis
     states = rec.states[: rec.length + 1]  # with the state after the last action, when recorded
     for t, state in enumerate(states):
         stream.set_time("step", sequence=t)
-        stream.log("grid/cells", rr.SegmentationImage(cell_classes(rec.layout, state)))
+        stream.log("grid/cells", rr.SegmentationImage(cell_classes(rec.layout, state, CELL_PX)))
         stream.log("grid/agent", _agent(state))
     # per-step series in one call each (rows on the `episode` and `step` timelines)
-    steps = np.arange(rec.length)
-    times = [rr.TimeColumn("episode", sequence=np.full(rec.length, episode_index)),
-             rr.TimeColumn("step", sequence=steps)]
+    times = _times(episode_index, range(rec.length))
     rewards = np.asarray(rec.rewards, dtype=np.float64)
     stream.send_columns("reward/step", indexes=times, columns=rr.Scalars.columns(scalars=rewards))
     stream.send_columns("reward/cumulative", indexes=times, columns=rr.Scalars.columns(scalars=np.cumsum(rewards)))
     names = [ID_TO_NAME[int(i)] for i in rec.subgoal_ids[: rec.length]]
     changes = [t for t in range(rec.length) if t == 0 or names[t] != names[t - 1]]
-    change_times = [rr.TimeColumn("episode", sequence=np.full(len(changes), episode_index)),
-                    rr.TimeColumn("step", sequence=changes)]
-    stream.send_columns("subgoal", indexes=change_times, columns=rr.TextDocument.columns(
+    stream.send_columns("subgoal", indexes=_times(episode_index, changes), columns=rr.TextDocument.columns(
         text=[f"**{names[t]}**" for t in changes], media_type=[rr.MediaType.MARKDOWN] * len(changes)))
     events = [(t, f"sub-goal -> {names[t]}", "INFO") for t in changes]
     events += [(t, f"action {ACTION_NAMES[int(a)]}", "DEBUG") for t, a in enumerate(rec.actions[: rec.length])]
@@ -127,9 +113,7 @@ def _log_episode(stream: rr.RecordingStream, tmp: Path, rec: EpisodeRecord, epis
         events.append((rec.length, "success" if rec.success else "episode ended without success",
                        "INFO" if rec.success else "WARN"))
     events.sort(key=lambda e: e[0])  # stable: a step's sub-goal change before its action
-    stream.send_columns("events", indexes=[
-        rr.TimeColumn("episode", sequence=np.full(len(events), episode_index)),
-        rr.TimeColumn("step", sequence=[t for t, _, _ in events])],
-        columns=rr.TextLog.columns(text=[m for _, m, _ in events], level=[lv for _, _, lv in events]))
+    stream.send_columns("events", indexes=_times(episode_index, [t for t, _, _ in events]),
+                        columns=rr.TextLog.columns(text=[m for _, m, _ in events], level=[lv for _, _, lv in events]))
     stream.flush()
     stream.disconnect()
