@@ -1,13 +1,15 @@
 """Where does the offline learners' evaluation stop improving? Success and steps per budget in epochs.
 
 Usage: python benchmarks/offline_budget.py [--env multikeydoor] [--epochs 1 2 4] [--seeds 0 1] [--episodes 100]
-                                           [--methods pure_dt hnsdt lstm_hier gru]
+                                           [--methods pure_dt hnsdt lstm_hier gru hnsdt_paper pure_dt_paper]
+                                           [--fail-probs 0.1 0.3]
 Trains each method on the pipeline's dataset (data/datasets/ENV; run `dvc repro` first) with the knobs of
 params.yaml but the budget: ``--epochs`` passes over its training data, no step cap. A decision transformer
 trains once for max(--epochs) and is copied after each listed epoch (the model after e epochs of a longer run
 is the model of an e-epoch run: no schedule depends on the total); a recurrent one trains once per budget.
 Every model is evaluated on the pipeline's cells at fail_prob 0.1 and 0.3 (--episodes each). Prints success
-and mean steps on success per budget, with gradient steps and the loss. Runs go in parallel on the local
+and mean steps on success per budget, with gradient steps, the loss and, for plan-following methods, the share
+of sub-goals reached within their allowance. Runs go in parallel on the local
 executor, one thread each, as in the pipeline.
 """
 
@@ -24,11 +26,11 @@ pin_process()
 import numpy as np  # noqa: E402
 
 
-def run(method, env, seed, epochs, keep, params_path, episodes):
+def run(method, env, seed, epochs, keep, params_path, episodes, fail_probs):
     from dataclasses import replace
     from pathlib import Path
 
-    from hnsdt.config import env_settings, executor_config, load_params
+    from hnsdt.config import env_settings, load_params, method_executor
     from hnsdt.evaluation.evaluate import Cell, build_agent, run_cell
     from hnsdt.methods import DT_METHODS
     from hnsdt.models.train import train_dt
@@ -47,19 +49,21 @@ def run(method, env, seed, epochs, keep, params_path, episodes):
         for e in sorted(keep):
             model, _, usage = train_recurrent(frames, model_cfg, replace(cfg, epochs=e, max_steps=0), progress=False)
             snaps[e] = (usage["gradient_steps"], model)
-    E, ex = env_settings(params, env), executor_config(params)
+    E, ex = env_settings(params, env), method_executor(params, method)
     rows = []
     for e, (step, m) in sorted(snaps.items()):
         m.eval()
         loss = [r["loss"] for r in curve if r["step"] <= step][-1] if method in DT_METHODS else float("nan")
         for fi, fp in enumerate(params["evaluate"]["fail_probs"]):
-            if fp not in (0.1, 0.3):
+            if fp not in fail_probs:
                 continue
             agent = build_agent(method, E["layout"], ex, m, facts)
             eps = run_cell(Cell(method, env, fp, seed), fi, E["layout"], E["max_steps"], episodes, agent)
             ok = [x.length for x in eps if x.success]
+            segments = [s.achieved for x in eps for s in x.segments]
             rows.append({"method": method, "seed": seed, "epochs": e, "steps": step, "loss": loss, "fail_prob": fp,
-                         "success": len(ok) / len(eps), "mean_steps": float(np.mean(ok)) if ok else float("nan")})
+                         "success": len(ok) / len(eps), "mean_steps": float(np.mean(ok)) if ok else float("nan"),
+                         "subgoals_reached": float(np.mean(segments)) if segments else float("nan")})
     return rows
 
 
@@ -74,16 +78,18 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     ap.add_argument("--methods", nargs="+", default=["pure_dt", "hnsdt"])
     ap.add_argument("--episodes", type=int, default=100)
+    ap.add_argument("--fail-probs", type=float, nargs="+", default=[0.1, 0.3])
     ap.add_argument("--params", default="params.yaml")
     args = ap.parse_args()
     t = time.perf_counter()
-    tasks = [(m, args.env, s, args.epochs, set(args.epochs), args.params, args.episodes)
+    tasks = [(m, args.env, s, args.epochs, set(args.epochs), args.params, args.episodes, args.fail_probs)
              for m in args.methods for s in args.seeds]
     rows = [r for part in run_tasks(run, tasks, Compute(), desc="budgets") for r in part]
     table = pd.DataFrame(rows)
     out = table.groupby(["method", "epochs", "fail_prob"]).agg(
         gradient_steps=("steps", "first"), loss=("loss", "mean"), success=("success", "mean"),
-        success_min=("success", "min"), mean_steps=("mean_steps", "mean")).reset_index()
+        success_min=("success", "min"), mean_steps=("mean_steps", "mean"),
+        subgoals_reached=("subgoals_reached", "mean")).reset_index()
     print(f"\n{args.env}, seeds {args.seeds}, {args.episodes} episodes per cell ({time.perf_counter() - t:.0f} s)")
     print(out.to_string(index=False, float_format=lambda v: f"{v:.3f}"))
 

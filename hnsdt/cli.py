@@ -52,13 +52,14 @@ def cmd_plan(args) -> None:
         start = SymbolicState.from_observation(layout, obs)
     else:
         start = SymbolicState.initial(layout)
-    ops = plan(layout, start, args.mode)
-    print(f"{env_id} on layout {layout.name}, planner mode {args.mode}, from {sorted(start.predicates(layout))}")
+    ops = plan(layout, start, args.mode, args.operators)
+    print(f"{env_id} on layout {layout.name}, planner mode {args.mode} over {args.operators} operators, "
+          f"from {sorted(start.predicates(layout))}")
     print(layout.text)
-    print(f"{'#':>2}  {'operator':<16} {'sub-goal id':>11}  {'target':>7}  {'cost':>4}")
+    print(f"{'#':>2}  {'operator':<20} {'sub-goal id':>11}  {'target':>7}  {'cost':>4}")
     for i, op in enumerate(ops, 1):
         g = psi(op)
-        print(f"{i:>2}  {op.name:<16} {g.id:>11}  {str(g.target):>7}  {op.cost:>4}")
+        print(f"{i:>2}  {op.name:<20} {g.id:>11}  {str(g.target):>7}  {op.cost:>4}")
     print(f"{len(ops)} operators, cost {plan_cost(ops)} steps without move failures")
 
 
@@ -66,7 +67,7 @@ def cmd_pddl(args) -> None:
     from hnsdt.symbolic.pddl import write_pddl
 
     _, layout, _ = _resolve_env(args)
-    domain, problem = write_pddl(layout, args.out)
+    domain, problem = write_pddl(layout, args.out, operators=args.operators)
     print(f"wrote {domain} and {problem}")
 
 
@@ -104,6 +105,7 @@ def cmd_train(args) -> None:
 def cmd_evaluate(args) -> None:
     from hnsdt.config import compute_settings, env_settings, evaluate_settings, executor_config, load_params
     from hnsdt.evaluation.evaluate import evaluate_all, summary
+    from hnsdt.methods import ARMS
     from hnsdt.provenance import git_revision, params_digest
 
     params = load_params(args.params)
@@ -111,7 +113,8 @@ def cmd_evaluate(args) -> None:
     envs = {e: env_settings(params, e) for e in settings["envs"]}
     compute = compute_settings(params, args.executor, args.workers)
     provenance = {"git_revision": git_revision(), "params_digest": params_digest(params)}  # into each recording
-    table = evaluate_all(settings, envs, executor_config(params), args.models, args.out, progress=not args.quiet,
+    executors = {arm: executor_config(params, arm) for arm in ARMS}
+    table = evaluate_all(settings, envs, executors, args.models, args.out, progress=not args.quiet,
                          recordings_dir=args.recordings, compute=compute, provenance=provenance)
     summ = summary(table)
     print(summ[["method", "env", "fail_prob", "success_mean", "steps_mean", "reward_mean"]].to_string(
@@ -168,7 +171,7 @@ def cmd_replay(args) -> None:
         subprocess.Popen([viewer, str(paths[0])])
 
 
-LEARNED_NAMES = ("hnsdt", "pure_dt", "lstm_hier", "gru", "dqn", "options")  # = hnsdt.methods.LEARNED, kept
+LEARNED_NAMES = ("hnsdt", "pure_dt", "hnsdt_paper", "pure_dt_paper", "lstm_hier", "gru", "dqn", "options")  # = hnsdt.methods.LEARNED, kept
 # literal so `--help` does not import the library
 
 
@@ -197,6 +200,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--layout", help="override the layout: built-in name, file path or grid text")
     p.add_argument("--mode", choices=["bfs", "cost"], default="bfs",
                    help="bfs: fewest operators (the paper's planner); cost: fewest steps (default: bfs)")
+    p.add_argument("--operators", choices=["goto", "move"], default="goto",
+                   help="goto: GoTo macro-operators (ours); move: the paper's one-cell Move operators "
+                   "(default: goto)")
     p.add_argument("--state", help="plan from this observation, e.g. 4,0,1,0 (row,col,flags...)")
     p.set_defaults(func=cmd_plan)
 
@@ -204,6 +210,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--env", required=True, help="env name from params.yaml or a gymnasium id")
     p.add_argument("--layout", help="override the layout")
     p.add_argument("--out", required=True, help="output folder for domain.pddl and problem.pddl")
+    p.add_argument("--operators", choices=["goto", "move"], default="goto",
+                   help="goto: GoTo macro-operators (ours); move: the paper's one-cell Move operators")
     p.set_defaults(func=cmd_pddl)
 
     p = sub.add_parser("collect", help="collect exploration data into a LeRobot dataset (the `collect` stage)")

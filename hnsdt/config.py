@@ -7,9 +7,10 @@ from typing import Any
 
 import yaml
 
-from hnsdt.agents.executor import ExecutorConfig
+from hnsdt.agents.executor import PAPER_PLANNER, ExecutorConfig
 from hnsdt.data.collect import POLICIES, Behaviour, CollectConfig
 from hnsdt.envs import ENV_IDS, LayoutError, load_layout
+from hnsdt.symbolic.operators import OPERATOR_SETS
 from hnsdt.symbolic.planner import PLAN_MODES
 from hnsdt.methods import DT_METHODS, METHODS, OFFLINE_BASELINES, ONLINE_BASELINES
 
@@ -85,15 +86,43 @@ def env_settings(params: dict, name: str) -> dict:
     return {"name": name, "id": env_id, "layout": layout, "max_steps": max_steps}
 
 
-def executor_config(params: dict) -> ExecutorConfig:
-    mode = _get(params, "planner.mode", str, "cost")
+PAPER_PLANNER = {"mode": PAPER_PLANNER["plan_mode"], "operators": PAPER_PLANNER["operators"]}  # as params keys
+
+
+def executor_config(params: dict, arm: str = "ours") -> ExecutorConfig:
+    """The planner and executor settings of an arm: ``planner`` (ours) or ``planner.paper`` over it (the
+    paper's arm; its mode and operators default to the paper's BFS over Move operators)."""
+    section = dict(_get(params, "planner", dict, {}))
+    paper = section.pop("paper", {})
+    known = {"mode", "operators", "allowance_factor", "allowance_min"}
+    for key, values in (("planner", section), ("planner.paper", paper)):
+        if not isinstance(values, dict):
+            raise _fail(params, f"{key} must be a mapping, got {values!r}")
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise _fail(params, f"{key}: unknown keys {unknown}; expected some of {sorted(known)}")
+    if arm == "paper":
+        section = section | PAPER_PLANNER | paper
+        prefix = "planner.paper"
+    else:
+        prefix = "planner"
+    mode, operators = section.get("mode", "cost"), section.get("operators", "goto")
     if mode not in PLAN_MODES:
-        raise _fail(params, f"planner.mode must be one of {PLAN_MODES}, got {mode!r}")
-    factor = _get(params, "planner.allowance_factor", float, 3.0)
-    minimum = _get(params, "planner.allowance_min", int, 6)
-    if factor <= 0 or minimum < 1:
-        raise _fail(params, "planner.allowance_factor must be > 0 and planner.allowance_min >= 1")
-    return ExecutorConfig(plan_mode=mode, allowance_factor=factor, allowance_min=minimum)
+        raise _fail(params, f"{prefix}.mode must be one of {PLAN_MODES}, got {mode!r}")
+    if operators not in OPERATOR_SETS:
+        raise _fail(params, f"{prefix}.operators must be one of {OPERATOR_SETS}, got {operators!r}")
+    factor, minimum = section.get("allowance_factor", 3.0), section.get("allowance_min", 6)
+    if (not isinstance(factor, (int, float)) or isinstance(factor, bool) or factor <= 0
+            or not isinstance(minimum, int) or isinstance(minimum, bool) or minimum < 1):
+        raise _fail(params, f"{prefix}.allowance_factor must be a number > 0 and {prefix}.allowance_min an "
+                    f"integer >= 1, got {factor!r} and {minimum!r}")
+    return ExecutorConfig(plan_mode=mode, operators=operators, allowance_factor=float(factor),
+                          allowance_min=minimum)
+
+
+def method_executor(params: dict, method: str) -> ExecutorConfig:
+    """The executor settings a plan-following method runs with (its arm's planner)."""
+    return executor_config(params, METHODS[method].arm)
 
 
 def fail_probs(params: dict, key: str) -> list[float]:
@@ -182,6 +211,14 @@ def train_settings(params: dict) -> dict:
             raise _fail(params, f"train.behaviours.{method} must be a list drawn from {POLICIES}, for a method "
                         f"in {LEARNED_METHODS}; got {names!r}")
     out["behaviours"] = {m: tuple(behaviours.get(m, [])) for m in LEARNED_METHODS}
+    from hnsdt.data.windows import LOSS_STEPS
+
+    losses = _get(params, "train.loss", dict, {})
+    for method, value in losses.items():
+        if method not in LEARNED_METHODS or value not in LOSS_STEPS:
+            raise _fail(params, f"train.loss.{method} must be one of {LOSS_STEPS}, for a method in "
+                        f"{LEARNED_METHODS}; got {value!r}")
+    out["loss"] = {m: losses.get(m, "window") for m in LEARNED_METHODS}
     cfg = out["config"]
     if cfg.epochs < 1 or cfg.batch_size < 1 or cfg.lr <= 0 or cfg.max_steps < 0:
         raise _fail(params, "train: epochs and batch_size must be >= 1, lr > 0, max_steps >= 0")

@@ -25,19 +25,23 @@ def plan_runs(params: dict, env: str, method: str, seeds: list[int], dataset: Pa
     training = METHODS[method].training
     frames = None
     if training == "dataset":
+        from hnsdt.config import method_executor
         from hnsdt.data.windows import load_frames
 
-        frames = load_frames(dataset)  # read once, shipped to every seed's task
+        # read once, shipped to every seed's task, with the sub-goal labels of the method's operators
+        frames = load_frames(dataset, method_executor(params, method).operators)
     runs = []
     if method in DT_METHODS:
         ts = train_settings(params)
         if method not in ts["methods"]:
             raise ValueError(f"method {method!r} is not in train.methods {ts['methods']}")
         model_cfg = model_config(params, env, DT_CONDITION[method])
+        if model_cfg.condition == "subgoal":
+            _check_operator_coverage(frames, params, env, method, ts["behaviours"][method])
         starts = np.unique(frames.episode_start)
         facts = {"dataset": str(dataset), "target_return": float(frames.returns_to_go[starts].max())}  # pure DT's
         for seed in seeds:
-            cfg = replace(ts["config"], seed=seed, behaviours=ts["behaviours"][method])
+            cfg = replace(ts["config"], seed=seed, behaviours=ts["behaviours"][method], loss=ts["loss"][method])
             runs.append((method, seed, model_cfg, cfg, frames, facts))
         return runs
     kind = "offline" if training == "dataset" else "online"
@@ -52,6 +56,29 @@ def plan_runs(params: dict, env: str, method: str, seeds: list[int], dataset: Pa
             data, facts = (bs["env"]["layout"], bs["env"]["max_steps"]), {}
         runs.append((method, seed, bs["model"], bs["train"], data, facts))
     return runs
+
+
+def _check_operator_coverage(frames, params: dict, env: str, method: str, behaviours) -> None:
+    """Every operator the method's planner can hand its DT must have at least one training segment (Theorem 2's
+    m ≥ 1); a dataset too small for that is an error naming the missing operators, before any training."""
+    from hnsdt.config import env_settings, method_executor
+    from hnsdt.symbolic.subgoals import NAME_TO_ID
+
+    layout = env_settings(params, env)["layout"]
+    names = ([f"PickKey({k})" for k in layout.keys] + [f"OpenDoor({d})" for d in layout.doors]
+             + [f"PickItem({i})" for i in layout.items])
+    if method_executor(params, method).operators == "move":
+        names.append("Move")
+    else:
+        names += ([f"GoTo(key {k})" for k in layout.keys] + [f"GoTo(door {d})" for d in layout.doors]
+                  + [f"GoTo(item {i})" for i in layout.items] + ["GoTo(exit)"])
+    used = np.isin(frames.policy, list(behaviours)) if len(behaviours) else np.ones(len(frames), bool)
+    present = set(np.unique(frames.subgoals[used]).tolist())
+    missing = [name for name in names if NAME_TO_ID[name] not in present]
+    if missing:
+        raise ValueError(f"{method} on {env}: the training episodes (behaviours {list(behaviours) or 'all'}) give no "
+                         f"segment of {', '.join(missing)}; collect more episodes of those behaviours "
+                         "(collect.behaviours in params.yaml)")
 
 
 def train_run(method: str, seed: int, model_cfg, train_cfg, data, facts: dict, progress: bool = False):

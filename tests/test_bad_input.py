@@ -94,6 +94,10 @@ PARAM_CASES = {
     "unknown method": ({"evaluate.methods": ["symbolic", "ppo"]}, EVALUATE, "['ppo']"),
     "unknown behaviour policy": ({"collect.behaviours.0.policy": "teleport"}, COLLECT, "policy must be one of"),
     "unknown executor mode": ({"planner.mode": "astar"}, COLLECT, "planner.mode must be one of"),
+    "unknown operator set": ({"planner.operators": "teleport"}, COLLECT, "planner.operators must be one of"),
+    "unknown paper-arm operators": ({"planner.paper.operators": "jump"}, EVALUATE,
+                                    "planner.paper.operators must be one of"),
+    "unknown arm": ({"planner.papr": {"mode": "bfs"}}, COLLECT, "planner: unknown keys ['papr']"),
     "empty seed list": ({"train.seeds": []}, EVALUATE, "train.seeds"),
     "missing section": ({"collect": DELETE}, COLLECT, "missing key collect"),
     "unknown executor": ({"compute.executor": "slurm"}, EVALUATE, "compute.executor must be one of"),
@@ -215,6 +219,19 @@ def test_replay_of_an_episode_that_does_not_exist(workdir, tmp_path):
     out = hnsdt("replay", "hnsdt/keydoor/fp0.1/seed0/ep99", cwd=w)
     assert_one_error_line(out, "no episode 'hnsdt/keydoor/fp0.1/seed0/ep99'")
     assert _outputs(w) == before
+
+
+def test_a_dataset_without_an_operator_s_segments_stops_training(tmp_path):
+    """The paper's HNSDT learns from random exploration only: a dataset with none cannot teach it PickKey,
+    OpenDoor or Move, and training says so before it starts."""
+    params = small_params(**{"collect.behaviours.0.episodes": 0, "train.methods": ["hnsdt_paper"]})
+    (tmp_path / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
+    assert hnsdt(*COLLECT[:3], "--out", "data", "--quiet", cwd=tmp_path).returncode == 0
+    before = _outputs(tmp_path)
+    out = hnsdt("train", "--env", "keydoor", "--method", "hnsdt_paper", "--quiet", "--dataset", "data", "--out", "m",
+                "--curves", "c", cwd=tmp_path)
+    assert_one_error_line(out, "give no segment of PickKey(a), OpenDoor(A), Move")
+    assert _outputs(tmp_path) == before
 
 
 def test_the_table_has_at_least_twenty_cases():

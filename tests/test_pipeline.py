@@ -79,7 +79,7 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
         assert (repo_copy / f"models/keydoor/{method}/seed0/model.safetensors").is_file()
         assert (repo_copy / f"plots/train/keydoor-{method}/seed0.csv").is_file()
     table = pd.read_csv(repo_copy / "results/episodes.csv", keep_default_na=False)
-    assert len(table) == 7 * 1 * 2 * 1 * 4  # methods x envs x fail_probs x seeds x episodes
+    assert len(table) == len(METHODS) * 1 * 2 * 1 * 4  # methods x envs x fail_probs x seeds x episodes
     metrics = json.loads((repo_copy / "results/metrics.json").read_text())
     assert metrics["keydoor"]["symbolic"]["fail_0"]["success_mean"] == 1.0
     assert set(metrics["keydoor"]) == set(STAGES) | {"symbolic"}

@@ -91,7 +91,7 @@ def test_psi_vocabulary_is_fixed_and_readable(multikeydoor):
     ids = [psi(o).id for o in ops]
     assert len(set(ids)) == len(ids) and all(0 < i < VOCAB_SIZE for i in ids)
     assert [ID_TO_NAME[i] for i in ids] == [o.name for o in ops]
-    assert psi(ops[0]).target == (2, 0) and NAME_TO_ID["GoTo(exit)"] == VOCAB_SIZE - 1
+    assert psi(ops[0]).target == (2, 0) and NAME_TO_ID["GoTo(exit)"] == VOCAB_SIZE - 2 and NAME_TO_ID["Move"] == VOCAB_SIZE - 1
     assert ID_TO_NAME[0] == "none"
 
 

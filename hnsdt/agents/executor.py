@@ -33,13 +33,17 @@ class Segment:
 @dataclass
 class ExecutorConfig:
     plan_mode: str = "cost"  # "bfs" = fewest operators (the paper's BFS), "cost" = fewest expected steps
+    operators: str = "goto"  # "goto" = GoTo macro-operators (ours), "move" = the paper's one-cell Move operators
     allowance_factor: float = 3.0  # an operator may take this many times its nominal cost ...
     allowance_min: int = 6  # ... but never fewer steps than this before a replan
 
 
+PAPER_PLANNER = {"plan_mode": "bfs", "operators": "move"}  # the paper's arm (Appendix B): BFS over Move operators
+
+
 @lru_cache(maxsize=65536)
-def _still_valid(layout: Layout, state: SymbolicState, ops: tuple[Operator, ...]) -> bool:
-    return is_valid_plan(layout, state, list(ops))
+def _still_valid(layout: Layout, state: SymbolicState, ops: tuple[Operator, ...], operators: str) -> bool:
+    return is_valid_plan(layout, state, list(ops), operators)
 
 
 @dataclass
@@ -91,7 +95,7 @@ class PlanExecutor:
             self.replans += 1
             self.replan_reasons.append(f"{self.t}:{reason}")
         try:
-            self.plan = plan(self.layout, state, self.config.plan_mode)
+            self.plan = plan(self.layout, state, self.config.plan_mode, self.config.operators)
             self.stuck = False
         except NoPlanError:
             self.plan, self.stuck = [], True
@@ -118,7 +122,7 @@ class PlanExecutor:
             self._replan(state, "plan exhausted")
         elif not advanced and self.t - self.op_start > self.allowance(op):
             self._replan(state, f"overran {op.name}")
-        elif not _still_valid(self.layout, state, tuple(self.plan[self.index:])):
+        elif not _still_valid(self.layout, state, tuple(self.plan[self.index:]), self.config.operators):
             self._replan(state, f"preconditions broken at {op.name}")
         return self.operator
 

@@ -1,7 +1,8 @@
 """The symbolic baseline of the paper: the BFS plan executed by hand-written controllers.
 
 Each operator's target cell is reached along a shortest path (through walls and open doors), recomputed from the
-current cell after every step so failed moves are retried; interaction operators then pick or open.
+current cell after every step so failed moves are retried; interaction operators then pick or open. With the
+paper's one-cell ``Move`` operators (``operators: move``) the controller steps towards the operator's target.
 """
 
 from __future__ import annotations
@@ -12,7 +13,7 @@ from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.agents.hierarchical import HierarchicalAgent
 from hnsdt.agents.navigation import Navigator
 from hnsdt.envs.keydoor import PICK
-from hnsdt.envs.layout import Layout
+from hnsdt.envs.layout import MOVES, Layout
 
 
 class SymbolicAgent(HierarchicalAgent):
@@ -28,6 +29,12 @@ class SymbolicAgent(HierarchicalAgent):
     def low_level(self, obs: np.ndarray, subgoal_ids: np.ndarray, targets: np.ndarray) -> np.ndarray:
         masks = obs[:, self._door_cols] @ self._door_bits
         has_goal = subgoal_ids > 0
-        target_idx = self.navigator.target_grid[targets[:, 0], targets[:, 1]]  # (-1, -1) rows are masked below
-        actions = self.navigator.controller_actions(target_idx, masks, obs[:, :2])
+        if self.config.operators == "move":  # the target is a neighbour (Move) or the agent's own cell
+            delta = targets - obs[:, :2]
+            actions = np.full(len(obs), PICK, dtype=np.int64)
+            for a, (dr, dc) in enumerate(MOVES):
+                actions[(delta[:, 0] == dr) & (delta[:, 1] == dc)] = a
+        else:
+            target_idx = self.navigator.target_grid[targets[:, 0], targets[:, 1]]  # (-1, -1) rows masked below
+            actions = self.navigator.controller_actions(target_idx, masks, obs[:, :2])
         return np.where(has_goal, actions, PICK)  # nothing to pursue (done or trapped): a harmless no-op

@@ -6,6 +6,9 @@ Behaviours (each a list entry of ``collect.behaviours`` in params.yaml):
 * ``noisy_planner``: the symbolic agent (plan + shortest-path controllers) with each action replaced by a
   uniform one with probability ``epsilon``; sub-goals are the operators it was executing.
 
+Every episode also carries the paper's labelling (``move_subgoal``): its frames segmented in hindsight by the
+Move / PickKey / OpenDoor / PickItem operators of Appendix B, whatever the behaviour.
+
 ``start: layout`` starts at ``@``; ``start: random`` starts on a random free cell (never a closed door or the
 exit) with every key/door/item flag drawn at random, which covers sub-goals from many situations. Episodes of
 each behaviour are split evenly over ``fail_probs``. Everything is seeded from ``seed``: same settings, same
@@ -116,9 +119,11 @@ def _episode_record(cfg: CollectConfig, b: Behaviour, fail_prob: float, seed: in
         ids, targets = hindsight_labels(cfg.layout, ep.states)
     else:
         ids, targets = ep.subgoal_ids, ep.subgoal_targets
+    move_ids, move_targets = hindsight_labels(cfg.layout, ep.states, "move")
     return {
         "states": ep.states, "actions": ep.actions, "rewards": ep.rewards, "success": ep.success,
-        "subgoal_ids": ids, "subgoal_targets": targets,
+        "subgoal_ids": ids, "subgoal_targets": targets, "move_subgoal_ids": move_ids,
+        "move_subgoal_targets": move_targets,
         "meta": {
             "env_id": cfg.env_id, "layout": cfg.layout.name, "fail_prob": float(fail_prob), "seed": seed,
             "batch_index": i, "policy": b.policy, "behaviour": b.label, "start": b.start,
@@ -128,14 +133,11 @@ def _episode_record(cfg: CollectConfig, b: Behaviour, fail_prob: float, seed: in
 
 
 def dataset_card(cfg: CollectConfig, episodes: list[dict], repo_id: str) -> str:
-    frames = Counter()
-    for ep in episodes:
-        frames.update(ID_TO_NAME[int(i)] for i in ep["subgoal_ids"])
     by_behaviour: dict[tuple[str, float], list[bool]] = {}
     for ep in episodes:
         m = ep["meta"]
         by_behaviour.setdefault((m["behaviour"], m["fail_prob"]), []).append(m["success"])
-    total = sum(frames.values())
+    total = sum(len(ep["actions"]) for ep in episodes)
     lines = [
         f"# {repo_id}", "",
         f"Exploration data for `{cfg.env_id}` on layout `{cfg.layout.name}` (LeRobot v3.0, written by hnsdt).",
@@ -149,9 +151,12 @@ def dataset_card(cfg: CollectConfig, episodes: list[dict], repo_id: str) -> str:
     ]
     for (label, f), succ in sorted(by_behaviour.items()):
         lines.append(f"| {label} | {f:g} | {len(succ)} | {np.mean(succ):.3f} |")
-    lines += ["", "## Coverage: frames per sub-goal", "", "| sub-goal | frames | share |", "|---|---|---|"]
-    for name, count in sorted(frames.items(), key=lambda kv: ID_TO_NAME.index(kv[0])):
-        lines.append(f"| {name} | {count} | {count / total:.3f} |")
+    for key, title in (("subgoal_ids", "Coverage: frames per sub-goal (`subgoal`, GoTo operators)"),
+                       ("move_subgoal_ids", "Coverage of the paper's labelling (`move_subgoal`, Move operators)")):
+        frames = Counter(ID_TO_NAME[int(i)] for ep in episodes for i in ep[key])
+        lines += ["", f"## {title}", "", "| sub-goal | frames | share |", "|---|---|---|"]
+        for name, count in sorted(frames.items(), key=lambda kv: ID_TO_NAME.index(kv[0])):
+            lines.append(f"| {name} | {count} | {count / total:.3f} |")
     return "\n".join(lines) + "\n"
 
 

@@ -12,6 +12,9 @@ next.done           bool       (1,)    the episode ended with this step (success
 next.success        bool       (1,)    this step reached the goal holding every item
 subgoal             int64      (1,)    ψ id of the operator being pursued (0 = none), see meta/hnsdt.json
 subgoal.target      int64      (2,)    that operator's target cell (-1, -1 for none)
+move_subgoal        int64      (1,)    the paper's labelling: ψ id of the Move / PickKey / OpenDoor / PickItem
+                                       operator the frame serves, in hindsight (0 = none)
+move_subgoal.target int64      (2,)    that operator's target cell (a Move's destination)
 task                string             the sub-goal's readable name, e.g. ``GoTo(key a)``
 ==================  =========  ======  ==================================================================
 
@@ -64,6 +67,8 @@ def dataset_features(layout: Layout) -> dict:
         "next.success": {"dtype": "bool", "shape": (1,), "names": ["success"]},
         "subgoal": {"dtype": "int64", "shape": (1,), "names": ["subgoal_id"]},
         "subgoal.target": {"dtype": "int64", "shape": (2,), "names": ["row", "col"]},
+        "move_subgoal": {"dtype": "int64", "shape": (1,), "names": ["subgoal_id"]},
+        "move_subgoal.target": {"dtype": "int64", "shape": (2,), "names": ["row", "col"]},
     }
 
 
@@ -85,8 +90,8 @@ def _skip_image_embedding(features: dict):
 
 def write_dataset(root: str | Path, repo_id: str, layout: Layout, episodes: list[dict], fps: int,
                   meta: dict, card: str, progress: bool = False) -> Path:
-    """Write ``episodes`` (dicts with states, actions, rewards, success, subgoal_ids, subgoal_targets and a
-    ``meta`` row) as a LeRobot dataset at ``root``. Built in a temporary folder beside ``root`` and moved into
+    """Write ``episodes`` (dicts with states, actions, rewards, success, subgoal_ids, subgoal_targets, their
+    ``move_`` twins and a ``meta`` row) as a LeRobot dataset at ``root``. Built in a temporary folder beside ``root`` and moved into
     place only when complete, so a failure leaves no half-written dataset."""
     from hnsdt.symbolic.subgoals import ID_TO_NAME
 
@@ -128,6 +133,8 @@ def _add_episode(ds: LeRobotDataset, ep: dict, names: list[str]) -> None:
             "next.success": np.array([success], dtype=bool),
             "subgoal": np.array([ep["subgoal_ids"][t]], dtype=np.int64),
             "subgoal.target": ep["subgoal_targets"][t].astype(np.int64),
+            "move_subgoal": np.array([ep["move_subgoal_ids"][t]], dtype=np.int64),
+            "move_subgoal.target": ep["move_subgoal_targets"][t].astype(np.int64),
             "task": names[int(ep["subgoal_ids"][t])],
         })
 
@@ -162,7 +169,8 @@ def check_dataset(root: str | Path) -> dict:
 
 
 FEATURE_DTYPES = {"observation.state": "int64", "action": "int64", "next.reward": "float32", "next.done": "bool",
-                  "next.success": "bool", "subgoal": "int64", "subgoal.target": "int64"}  # as written above
+                  "next.success": "bool", "subgoal": "int64", "subgoal.target": "int64", "move_subgoal": "int64",
+                  "move_subgoal.target": "int64"}  # as written above
 
 
 def open_dataset(root: str | Path, delta_timestamps: dict | None = None, repo_id: str | None = None

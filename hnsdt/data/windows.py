@@ -47,20 +47,23 @@ def frames_from_arrays(states, actions, rewards, subgoals, targets, episode, tim
                   np.asarray(policy if policy is not None else [""] * n, dtype=object))
 
 
-def load_frames(root: str | Path) -> Frames:
+def load_frames(root: str | Path, operators: str = "goto") -> Frames:
+    """The dataset's frames, with the sub-goal labelling of the operator set ``operators``: ``goto`` reads
+    ``subgoal`` (the planner's operators, or hindsight GoTo labels), ``move`` the paper's ``move_subgoal``."""
     from hnsdt.data.lerobot_io import episode_table, open_dataset
 
+    column = {"goto": "subgoal", "move": "move_subgoal"}[operators]
     ds = open_dataset(root)
     cols = ds.hf_dataset.with_format("numpy")[:]
     policies = episode_table(root).set_index("episode_index")["policy"]
     return frames_from_arrays(np.stack(cols["observation.state"]), np.ravel(cols["action"]),
-                              np.ravel(cols["next.reward"]), np.ravel(cols["subgoal"]),
-                              np.stack(cols["subgoal.target"]), cols["episode_index"], cols["frame_index"],
+                              np.ravel(cols["next.reward"]), np.ravel(cols[column]),
+                              np.stack(cols[f"{column}.target"]), cols["episode_index"], cols["frame_index"],
                               policies.loc[cols["episode_index"]].to_numpy())
 
 
 def window_ends(frames: Frames, condition: str, behaviours=()) -> np.ndarray:
-    """Frames that end a training window: every frame with a sub-goal (HNSDT) or every frame (pure DT), of
+    """Frames that end a training window: every frame with a sub-goal (HNSDT) or every frame (pure DTs), of
     episodes collected by one of ``behaviours`` (all episodes when empty). Context reaches into any frame."""
     keep = frames.subgoals != 0 if condition == "subgoal" else np.ones(len(frames), dtype=bool)
     if len(behaviours):
@@ -68,8 +71,18 @@ def window_ends(frames: Frames, condition: str, behaviours=()) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
-def make_windows(frames: Frames, ends: np.ndarray, h: int, condition: str) -> dict[str, np.ndarray]:
-    """Windows of ``h`` steps ending at ``ends``, with the arrays the model's forward and loss read."""
+LOSS_STEPS = ("window", "last")
+
+
+def make_windows(frames: Frames, ends: np.ndarray, h: int, condition: str, loss: str = "window"
+                 ) -> dict[str, np.ndarray]:
+    """Windows of ``h`` steps ending at ``ends``, with the arrays the model's forward and loss read.
+
+    ``loss`` picks the steps the loss counts: ``window`` = every step of the window that serves its sub-goal
+    (every real step for the pure DTs), more signal per window; ``last`` = only the window's last step, so each
+    frame counts once (the paper's objective). With ``window`` a segment's early steps count in several
+    windows and its last step in one: harmless when every action of a segment leads to its sub-goal, biased
+    towards the non-achieving actions of hindsight-labelled random walks (README, "Two arms")."""
     offsets = np.arange(h - 1, -1, -1)
     idx = ends[:, None] - offsets[None, :]
     pad = idx < frames.episode_start[ends][:, None]
@@ -82,8 +95,16 @@ def make_windows(frames: Frames, ends: np.ndarray, h: int, condition: str) -> di
         g = frames.subgoals[ends]
         batch["subgoal_ids"] = g
         batch["subgoal_targets"] = frames.targets[ends]
-        batch["loss_mask"] = (frames.subgoals[idx] == g[:, None]) & ~pad
+        # the steps that serve this window's sub-goal: same operator id and target (all Move operators share
+        # one id, so the target tells a window's own move from the moves before it)
+        same = (frames.subgoals[idx] == g[:, None]) & (frames.targets[idx] == frames.targets[ends][:, None]).all(-1)
+        batch["loss_mask"] = same & ~pad
     else:
-        batch["returns"] = frames.returns_to_go[idx]
+        if condition == "return":
+            batch["returns"] = frames.returns_to_go[idx]
         batch["loss_mask"] = ~pad
+    if loss == "last":
+        batch["loss_mask"][:, :-1] = False
+    elif loss != "window":
+        raise ValueError(f"loss must be one of {LOSS_STEPS}, got {loss!r}")
     return batch

@@ -10,18 +10,19 @@ each is computed per seed and then reported as mean ± std over seeds.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from hnsdt.agents.executor import ExecutorConfig
+from hnsdt.agents.executor import PAPER_PLANNER, ExecutorConfig
 from hnsdt.agents.rollout import Episode, rollout
 from hnsdt.agents.symbolic import SymbolicAgent
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv
+from hnsdt.methods import ARMS
 from hnsdt.methods import method as lookup_method
 
 
@@ -63,12 +64,13 @@ def build_agent(method: str, layout: Layout, executor: ExecutorConfig, model=Non
     matter to the online baselines (ε-greedy noise, sampled options)."""
     if lookup_method(method).training == "none":
         return SymbolicAgent(layout, executor)
-    if method == "hnsdt":
+    condition = lookup_method(method).condition
+    if condition == "subgoal":
         from hnsdt.agents.dt_agents import HNSDTAgent
         return HNSDTAgent(layout, model, executor)
-    if method == "pure_dt":
+    if condition:
         from hnsdt.agents.dt_agents import PureDTAgent
-        return PureDTAgent(model, meta["target_return"])
+        return PureDTAgent(model, meta["target_return"] if condition == "return" else None)
     if method in ("lstm_hier", "gru"):
         from hnsdt.agents.baselines.recurrent import RecurrentAgent
         return RecurrentAgent(model)
@@ -100,7 +102,7 @@ def run_cell(cell: Cell, fail_index: int, layout: Layout, max_steps: int, episod
     return rollout(env, agent, seed=cell_seed(cell, fail_index))
 
 
-def episode_rows(cell: Cell, episodes: list[Episode], layout: Layout, plan_mode: str) -> list[dict]:
+def episode_rows(cell: Cell, episodes: list[Episode], layout: Layout, executor: ExecutorConfig) -> list[dict]:
     """One row per episode; plan-following methods also get their initial plan's length and cost and the
     cheapest plan's cost (inputs of the Theorem 1 check)."""
     from hnsdt.symbolic import SymbolicState, plan, plan_cost
@@ -113,7 +115,8 @@ def episode_rows(cell: Cell, episodes: list[Episode], layout: Layout, plan_mode:
                "plan_length": np.nan, "plan_cost": np.nan, "optimal_plan_cost": np.nan}
         if ep.plan:
             s0 = SymbolicState.from_observation(layout, ep.states[0])
-            row.update(plan_length=len(ep.plan), plan_cost=plan_cost(plan(layout, s0, plan_mode)),
+            row.update(plan_length=len(ep.plan),
+                       plan_cost=plan_cost(plan(layout, s0, executor.plan_mode, executor.operators)),
                        optimal_plan_cost=plan_cost(plan(layout, s0, "cost")))
         rows.append(row)
     return rows
@@ -128,7 +131,8 @@ def _navigator(layout: Layout):
 
 def segment_rows(cell: Cell, episodes: list[Episode], navigator) -> list[dict]:
     """One row per executed sub-goal segment, with the optimal expected steps to achieve its operator from the
-    segment's first state: d / (1 − fail_prob) for a shortest path of d moves, 1 for pick/open."""
+    segment's first state: d / (1 − fail_prob) for a shortest path of d moves (d = 1 for a Move operator), 1 for
+    pick/open."""
     rows = []
     lay = navigator.layout
     nk = len(lay.keys)
@@ -139,7 +143,9 @@ def segment_rows(cell: Cell, episodes: list[Episode], navigator) -> list[dict]:
                 continue
             state = ep.states[seg.start]
             target = tuple(int(v) for v in ep.subgoal_targets[seg.start])
-            if seg.operator.startswith("GoTo"):
+            if seg.operator.startswith("Move"):
+                optimal = 1 / (1 - cell.fail_prob)
+            elif seg.operator.startswith("GoTo"):
                 mask = navigator.door_mask({d for j, d in enumerate(lay.doors) if state[2 + nk + j]})
                 dist = navigator.distance[navigator.target_index[target], mask, state[0], state[1]]
                 optimal = dist / (1 - cell.fail_prob) if dist >= 0 else np.nan
@@ -227,12 +233,13 @@ def evaluate_run(method: str, env: str, seed: int, fail_probs: list[float], layo
         cell = Cell(method, env, fail_prob, seed)
         agent = build_agent(method, layout, executor, model, meta, epsilon, cell_seed(cell, fi) + 1)
         eps = run_cell(cell, fi, layout, max_steps, episodes, agent)
-        out.append((episode_rows(cell, eps, layout, executor.plan_mode), segment_rows(cell, eps, _navigator(layout)),
+        out.append((episode_rows(cell, eps, layout, executor), segment_rows(cell, eps, _navigator(layout)),
                     eps[:log_episodes]))
     return out
 
 
-def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig, models_root: str | Path,
+def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig | dict[str, ExecutorConfig],
+                 models_root: str | Path,
                  out_dir: str | Path, progress: bool = True, recordings_dir: str | Path | None = None,
                  compute=None, provenance: dict | None = None) -> pd.DataFrame:
     """Run every cell on ``compute``'s executor, write ``episodes.csv``, ``summary.csv``, ``metrics.json``
@@ -240,13 +247,21 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
     ``recordings`` beside ``out_dir``), each built in a temporary folder and moved into place when complete.
 
     The recordings live apart from the tables because rerun stamps every row of an ``.rrd`` with a
-    time-based id: the tables are the same bytes on every run, the ``.rrd`` files cannot be."""
+    time-based id: the tables are the same bytes on every run, the ``.rrd`` files cannot be.
+
+    ``executor`` is the planner settings of each arm (``{"ours": ..., "paper": ...}``); one config stands for
+    ours, with the paper's default (BFS over Move operators) for the paper's arm."""
     import json
 
     from hnsdt.executor import Compute, run_tasks
     from hnsdt.fileio import atomic_dir
     from hnsdt.logs import record_from_episode, write_mcap, write_rrd
 
+    if isinstance(executor, ExecutorConfig):
+        executor = {"ours": executor, "paper": replace(executor, **PAPER_PLANNER)}
+    missing = set(ARMS) - set(executor)
+    if missing:
+        raise ValueError(f"evaluate_all: no planner settings for arm(s) {sorted(missing)}")
     out = Path(out_dir)
     rec_out = Path(recordings_dir) if recordings_dir is not None else out.parent / "recordings"
     groups = [(m, e, s) for m in settings["methods"] for e in settings["envs"] for s in settings["seeds"]]
@@ -258,7 +273,7 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
             usage.append(training_usage(models_root, env, method, seed))
         log = settings["log_episodes"] if seed == settings["seeds"][0] else 0
         tasks.append((method, env, seed, settings["fail_probs"], envs[env]["layout"], envs[env]["max_steps"],
-                      settings["episodes"], executor, model, meta, settings.get("eval_epsilon", {}).get(method, 0.0),
+                      settings["episodes"], executor[lookup_method(method).arm], model, meta, settings.get("eval_epsilon", {}).get(method, 0.0),
                       log))
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate", progress=progress)
     with atomic_dir(out) as tmp, atomic_dir(rec_out) as rec_tmp:

@@ -18,7 +18,7 @@ import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
 
 from hnsdt.fileio import atomic_dir  # noqa: E402
-from hnsdt.methods import METHODS, PARADIGMS  # noqa: E402
+from hnsdt.methods import PAPER_ARM, METHODS, PARADIGMS  # noqa: E402
 from hnsdt.provenance import git_revision, params_digest  # noqa: E402
 
 METHOD_LABELS = {name: m.label for name, m in METHODS.items()}
@@ -271,10 +271,29 @@ def seed_lines(view: pd.DataFrame) -> list[str]:
     return lines
 
 
-def claim_lines(summ: pd.DataFrame, view: pd.DataFrame | None = None) -> tuple[list[str], list[dict]]:
+def arm_table(table: pd.DataFrame, arm: str) -> pd.DataFrame:
+    """The rows of one arm's comparison: the shared baselines plus that arm's transformers, which take the
+    names of ours (``hnsdt``, ``pure_dt``) so that the paper's claims read the same for both arms."""
+    if arm == "ours":
+        return table[~table.method.isin(PAPER_ARM.values())]
+    rename = {paper: ours for ours, paper in PAPER_ARM.items()}
+    kept = table[~table.method.isin(PAPER_ARM.keys())]
+    return kept.assign(method=kept.method.map(lambda m: rename.get(m, m)))
+
+
+def claim_lines(summ: pd.DataFrame, view: pd.DataFrame | None = None, arm: str = "ours"
+                ) -> tuple[list[str], list[dict]]:
     """Where our measurements agree or disagree with the paper's claims, one row per claim. A point value
     agrees when ours lies within two of the paper's standard deviations of the paper's mean. Claims about
-    learners whose seeds disagree also say how many seeds solve the env (``view``, from :func:`seed_view`)."""
+    learners whose seeds disagree also say how many seeds solve the env (``view``, from :func:`seed_view`).
+    ``arm`` picks whose HNSDT and pure DT the claims are about: ours or the paper's build (:func:`arm_table`)."""
+    summ = arm_table(summ, arm)
+    view = arm_table(view, arm) if view is not None else None
+    paper_names = PAPER_ARM if arm == "paper" else {}
+
+    def _label(method: str) -> str:
+        return METHOD_LABELS.get(paper_names.get(method, method), method)
+
     rows = []
     for env, fp, method, metric, mean, std in PAPER_POINTS:
         ours, ours_std = _cell(summ, env, fp, method, metric)
@@ -344,6 +363,46 @@ def claim_lines(summ: pd.DataFrame, view: pd.DataFrame | None = None) -> tuple[l
     lines = ["| claim (paper, Section 5) | paper | ours | verdict |", "|---|---|---|---|"]
     lines += [f"| {r['claim']} | {r['paper']} | {r['ours']} | {r['verdict']} |" for r in rows]
     return lines, rows
+
+
+def paper_arm_lines(summ: pd.DataFrame, results: Path) -> list[str]:
+    """Both arms side by side (success, steps of successful episodes and their ratio to the exact optimum, per
+    env × fail_prob), and how often the paper's HNSDT reached each kind of sub-goal its planner set."""
+    methods = [m for m in ("symbolic", *[x for pair in PAPER_ARM.items() for x in pair]) if m in set(summ.method)]
+    if not set(PAPER_ARM.values()) & set(methods):
+        return []
+    lines = ["| env | fail_prob | " + " | ".join(_label(m) for m in methods) + " |",
+             "|---|---|" + "---|" * len(methods)]
+    for (env, fp), c in summ.groupby(["env", "fail_prob"], sort=True):
+        cells = []
+        for m in methods:
+            r = c[c.method == m]
+            if r.empty:
+                cells.append("–")
+                continue
+            r = r.iloc[0]
+            ratio = f" ({r.steps_ratio:.2f}×)" if "steps_ratio" in c and not pd.isna(r.steps_ratio) else ""
+            cells.append(f"{r.success_mean:.3f} / {_fmt(r.steps_mean, '.1f')}{ratio}")
+        lines.append(f"| {env} | {fp:g} | " + " | ".join(cells) + " |")
+    lines += ["", "Each cell: success rate / mean steps of successful episodes (steps relative to the exact "
+              "optimum), mean over seeds.", ""]
+    seg_path = results / "segments.csv"
+    if seg_path.is_file():
+        seg = pd.read_csv(seg_path)
+        seg = seg[seg.method == PAPER_ARM["hnsdt"]]
+        if not seg.empty:
+            seg = seg.assign(kind=seg.operator.str.extract(r"^(\w+)", expand=False))
+            t = seg.groupby(["env", "fail_prob", "kind"]).achieved.agg(["mean", "size"]).reset_index()
+            kinds = sorted(set(t.kind), key=lambda k: (k != "Move", k))
+            lines += [f"Sub-goals of {_label(PAPER_ARM['hnsdt'])} reached within their step allowance (share of "
+                      "the planner's operators, all seeds; `results/segments.csv`):", "",
+                      "| env | fail_prob | " + " | ".join(kinds) + " |", "|---|---|" + "---|" * len(kinds)]
+            for (env, fp), g in t.groupby(["env", "fail_prob"], sort=True):
+                by = g.set_index("kind")
+                lines.append(f"| {env} | {fp:g} | " + " | ".join(
+                    f"{by.loc[k, 'mean']:.3f} (n={int(by.loc[k, 'size'])})" if k in by.index else "–"
+                    for k in kinds) + " |")
+    return lines
 
 
 def usage_lines(results: Path) -> list[str]:
@@ -449,6 +508,8 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
         paradigm_figure(summ, tmp / "figures" / "paradigms.png")
         view = seed_view(episodes)
         claims, claim_rows = claim_lines(summ, view)
+        paper_claims, paper_claim_rows = claim_lines(summ, view, arm="paper")
+        arms = paper_arm_lines(summ, results)
         usage = usage_lines(results)
         has_optimum = "regret" in summ
         if has_optimum:
@@ -490,6 +551,14 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
             *(["## Agreement with the paper's claims", "", *claims, "",
                 "The paper's own numbers come from its text (its figures are not in the source); a point value "
                 "agrees when ours is within two of the paper's standard deviations.", ""] if len(claims) > 2 else []),
+            *(["## The paper's own configuration", "",
+                f"Our HNSDT and pure DT differ from the paper's (README, \"Two arms\"). "
+                f"{_label(PAPER_ARM['hnsdt'])} is the paper's build: one-cell Move operators planned by BFS, a DT "
+                "trained only on random exploration segmented in hindsight by those operators; "
+                f"{_label(PAPER_ARM['pure_dt'])} is its pure DT, trained on the same random exploration with no "
+                "conditioning token. Both arms against the symbolic baseline:", "", *arms, "",
+                "The paper's claims again, with the paper's HNSDT and pure DT in place of ours (every other method "
+                "unchanged):", "", *paper_claims, ""] if arms else []),
             "## Seeds that solve each environment", "", *seed_lines(view), "",
             f"A seed solves an environment when it succeeds in at least {SOLVED:.0%} of its evaluated episodes "
             f"(all failure probabilities). The interval resamples the training seeds {BOOTSTRAP:,} times "
@@ -507,6 +576,8 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
         text[-1:-1] = theorem_text
         (tmp / "report.md").write_text("\n".join(text))
         theorem_data = {**theorem_data, "claims": claim_rows} if claim_rows else theorem_data
+        if paper_claim_rows and arms:
+            theorem_data["claims_paper_arm"] = paper_claim_rows
         if theorem_data:
             (tmp / "theorems.json").write_text(json.dumps(theorem_data, indent=2, sort_keys=True, default=float) + "\n")
         (tmp / "provenance.json").write_text(json.dumps(

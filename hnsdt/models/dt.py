@@ -5,8 +5,9 @@ Two conditionings share one network:
 * ``condition="subgoal"`` (HNSDT): one sub-goal token ``g = ψ(o)`` (operator id + target cell, its own
   embeddings) leads the window. The loss only counts steps whose own sub-goal is ``g`` (a window that starts
   in an earlier operator's segment still gives its history as context).
-* ``condition="return"`` (the pure DT baseline, as in the original decision transformer): each step also
+* ``condition="return"`` (our pure DT baseline, as in the original decision transformer): each step also
   carries its return-to-go ``R_k``; no sub-goals.
+* ``condition="none"`` (the paper's pure DT, Appendix C: "g≤t remains empty"): states and actions only.
 
 Two token layouts (``tokens``):
 
@@ -34,14 +35,14 @@ import torch.nn.functional as F
 from hnsdt.symbolic.subgoals import VOCAB_SIZE
 
 N_ACTIONS = 5
-CONDITIONS = ("subgoal", "return")
+CONDITIONS = ("subgoal", "return", "none")
 TOKEN_LAYOUTS = ("step", "interleaved")
 NO_ACTION = N_ACTIONS  # "step" layout: the previous action of a window's or an episode's first step
 
 
 @dataclass
 class DTConfig:
-    condition: str  # "subgoal" (HNSDT) or "return" (pure DT)
+    condition: str  # "subgoal" (HNSDT), "return" (our pure DT) or "none" (the paper's pure DT)
     n_flags: int
     grid_h: int
     grid_w: int
@@ -66,7 +67,7 @@ class DTConfig:
     def tokens_per_step(self) -> int:
         if self.tokens == "step":
             return 1
-        return 2 if self.condition == "subgoal" else 3
+        return 3 if self.condition == "return" else 2
 
     @property
     def seq_len(self) -> int:
@@ -95,7 +96,7 @@ class DecisionTransformer(nn.Module):
             self.subgoal_emb = nn.Embedding(VOCAB_SIZE, d)
             self.target_row_emb = nn.Embedding(cfg.grid_h + 1, d)  # index 0 = no target
             self.target_col_emb = nn.Embedding(cfg.grid_w + 1, d)
-        else:
+        elif cfg.condition == "return":
             self.return_proj = nn.Linear(1, d)
         self.type_emb = nn.Embedding(3, d)  # state, action, condition: the model tells token kinds apart
         self.pad_emb = nn.Parameter(torch.zeros(d))
@@ -117,7 +118,7 @@ class DecisionTransformer(nn.Module):
 
         states (B, h, d) int64; actions (B, h) int64 (the last one is never read); timesteps (B, h) int64;
         pad (B, h) bool marks steps before the episode began (windows are left-padded); subgoal_ids (B,) and
-        subgoal_targets (B, 2) for ``subgoal``; returns (B, h) float for ``return``. Padded steps become a
+        subgoal_targets (B, 2) for ``subgoal``; returns (B, h) float for ``return``; neither for ``none``. Padded steps become a
         learned pad token, identically in training and at inference, so no attention mask is needed."""
         cfg = self.cfg
         B, h = actions.shape
@@ -140,10 +141,11 @@ class DecisionTransformer(nn.Module):
             return self.head(self.norm(x[:, seq.shape[1] - h:]))
         s_tok = (self.embed_states(states) + time + self.type_emb.weight[0]) * keep + self.pad_emb * (1 - keep)
         a_tok = (self.action_emb(actions) + time + self.type_emb.weight[1]) * keep + self.pad_emb * (1 - keep)
-        if cfg.condition == "subgoal":
-            steps = torch.stack([s_tok, a_tok], dim=2).reshape(B, 2 * h, -1)
-            seq = torch.cat([g[:, None], steps[:, :-1]], dim=1)  # drop the last action: it is the target
-            state_pos = 1 + 2 * torch.arange(h, device=seq.device)
+        if cfg.condition != "return":
+            steps = torch.stack([s_tok, a_tok], dim=2).reshape(B, 2 * h, -1)[:, :-1]  # the last action is the target
+            lead = int(cfg.condition == "subgoal")
+            seq = torch.cat([g[:, None], steps], dim=1) if lead else steps
+            state_pos = lead + 2 * torch.arange(h, device=seq.device)
         else:
             r_tok = self.return_proj(returns[..., None] / cfg.return_scale) + time + self.type_emb.weight[2]
             r_tok = r_tok * keep + self.pad_emb * (1 - keep)

@@ -27,6 +27,7 @@ class TrainConfig:
     device: str = "auto"  # "auto" = cuda if available, else cpu
     log_every: int = 10  # one training-curve row per this many steps
     behaviours: tuple[str, ...] = ()  # train on episodes of these collection behaviours (empty = all)
+    loss: str = "window"  # the window steps the loss counts: "window" or "last" (hnsdt.data.windows.make_windows)
 
 
 def pick_device(name: str) -> torch.device:
@@ -74,7 +75,7 @@ def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bo
             if step >= total_steps:
                 break
             rows = order[b * cfg.batch_size : (b + 1) * cfg.batch_size]
-            batch = make_windows(frames, rows, model_cfg.context, model_cfg.condition)
+            batch = make_windows(frames, rows, model_cfg.context, model_cfg.condition, cfg.loss)
             loss = model.loss(_to_tensors(batch, device))
             opt.zero_grad(set_to_none=True)
             loss.backward()

@@ -10,7 +10,12 @@ OpenDoor(D)        At(door cell), HasKey(d), ¬DoorOpen(D)                      
 GoTo(item i)       ¬HasItem(i), item cell reachable                             At(item cell)        path length
 PickItem(i)        At(item cell), ¬HasItem(i)                                   HasItem(i)           1
 GoTo(exit)         HasItem(every item), exit reachable                          At(exit), Done       path length
+Move(c → c')       At(c), c' a 4-neighbour of c, not a wall, c not a closed door  At(c')               1
 =================  ===========================================================  ===================  ==============
+
+Two operator sets (``OPERATOR_SETS``): ``goto`` (ours: GoTo macro-operators to objects, then the interactions)
+and ``move`` (the paper's Appendix B: one-cell ``Move`` operators plus PickKey / OpenDoor / PickItem; the goal
+Done is reached by the Move onto the exit holding every item).
 
 "Reachable" follows the environment: a closed door cell may be the end of a path but never a step along it.
 """
@@ -19,19 +24,19 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from hnsdt.envs.layout import Cell, Layout, reachable_cells
+from hnsdt.envs.layout import MOVES, Cell, Layout, reachable_cells
 from hnsdt.symbolic.abstraction import DONE, SymbolicState, at, door_open, has_item, has_key
 
-GOTO_KEY, PICK_KEY, GOTO_DOOR, OPEN_DOOR, GOTO_ITEM, PICK_ITEM, GOTO_EXIT = (
-    "goto_key", "pick_key", "goto_door", "open_door", "goto_item", "pick_item", "goto_exit")
-GOTO_KINDS = (GOTO_KEY, GOTO_DOOR, GOTO_ITEM, GOTO_EXIT)
+GOTO_KEY, PICK_KEY, GOTO_DOOR, OPEN_DOOR, GOTO_ITEM, PICK_ITEM, GOTO_EXIT, MOVE = (
+    "goto_key", "pick_key", "goto_door", "open_door", "goto_item", "pick_item", "goto_exit", "move")
+GOTO_KINDS = (GOTO_KEY, GOTO_DOOR, GOTO_ITEM, GOTO_EXIT, MOVE)  # operators that change the agent's cell
 INTERACT_KINDS = (PICK_KEY, OPEN_DOOR, PICK_ITEM)
 
 
 @dataclass(frozen=True)
 class Operator:
     kind: str
-    obj: str  # key letter, door letter, item digit, or "exit"
+    obj: str  # key letter, door letter, item digit, "exit", or the source cell "r,c" of a Move
     target: Cell
     pre: frozenset[str] = field(compare=False)
     eff: frozenset[str] = field(compare=False)
@@ -43,7 +48,7 @@ class Operator:
             GOTO_KEY: f"GoTo(key {self.obj})", PICK_KEY: f"PickKey({self.obj})",
             GOTO_DOOR: f"GoTo(door {self.obj})", OPEN_DOOR: f"OpenDoor({self.obj})",
             GOTO_ITEM: f"GoTo(item {self.obj})", PICK_ITEM: f"PickItem({self.obj})",
-            GOTO_EXIT: "GoTo(exit)",
+            GOTO_EXIT: "GoTo(exit)", MOVE: f"Move({self.obj}->{self.target[0]},{self.target[1]})",
         }[self.kind]
 
     def __str__(self) -> str:
@@ -69,6 +74,12 @@ def goto(kind: str, obj: str, target: Cell, dist: int, extra_pre: frozenset[str]
     return Operator(kind, obj, target, extra_pre, frozenset(eff), dist)
 
 
+def move(layout: Layout, source: Cell, target: Cell) -> Operator:
+    """Move(source → target) between 4-neighbours; Done too when ``target`` is the exit (the goal check of the
+    planner reads the items from the state)."""
+    return Operator(MOVE, f"{source[0]},{source[1]}", target, frozenset({at(source)}), frozenset({at(target)}))
+
+
 def interaction(layout: Layout, kind: str, obj: str) -> Operator:
     if kind == PICK_KEY:
         cell = layout.keys[obj]
@@ -80,8 +91,12 @@ def interaction(layout: Layout, kind: str, obj: str) -> Operator:
     return Operator(kind, obj, cell, frozenset({at(cell)}), frozenset({has_item(obj)}))
 
 
-def applicable(layout: Layout, s: SymbolicState) -> list[Operator]:
-    """Every operator whose preconditions hold in ``s``, in a fixed order (keys, doors, items, exit)."""
+OPERATOR_SETS = ("goto", "move")
+
+
+def applicable(layout: Layout, s: SymbolicState, operators: str = "goto") -> list[Operator]:
+    """Every operator of the set ``operators`` whose preconditions hold in ``s``, in a fixed order (keys,
+    doors, items, then the moves: GoTo to keys, doors, items, exit, or Move up, right, down, left)."""
     ops: list[Operator] = []
     for k, cell in layout.keys.items():
         if k not in s.keys and s.cell == cell:
@@ -92,6 +107,8 @@ def applicable(layout: Layout, s: SymbolicState) -> list[Operator]:
     for i, cell in layout.items.items():
         if i not in s.items and s.cell == cell:
             ops.append(interaction(layout, PICK_ITEM, i))
+    if operators == "move":
+        return ops + _moves(layout, s)
     dist = reachable_cells(layout, s.cell, set(s.doors))
     candidates = (
         [(GOTO_KEY, k, c) for k, c in layout.keys.items() if k not in s.keys]
@@ -104,4 +121,17 @@ def applicable(layout: Layout, s: SymbolicState) -> list[Operator]:
     if s.items >= set(layout.items) and layout.goal in dist and s.cell != layout.goal:
         pre = frozenset(has_item(i) for i in layout.items)
         ops.append(goto(GOTO_EXIT, "exit", layout.goal, dist[layout.goal], pre))
+    return ops
+
+
+def _moves(layout: Layout, s: SymbolicState) -> list[Operator]:
+    """The legal one-cell moves from ``s``: onto any non-wall neighbour, never out of a closed door."""
+    if s.cell in {c for d, c in layout.doors.items() if d not in s.doors}:
+        return []
+    h, w = layout.shape
+    ops = []
+    for dr, dc in MOVES:
+        r, c = s.cell[0] + dr, s.cell[1] + dc
+        if 0 <= r < h and 0 <= c < w and not layout.walls[r, c]:
+            ops.append(move(layout, s.cell, (r, c)))
     return ops

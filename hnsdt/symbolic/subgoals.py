@@ -1,7 +1,8 @@
 """ψ: operator → sub-goal token, an integer id in a fixed, layout-independent vocabulary plus a target cell.
 
-The vocabulary enumerates every operator any layout can ground (26 keys, 26 doors, 10 items, the exit), so a
-model trained on one layout reads the same ids on another. Id 0, ``none``, marks frames that serve no
+The vocabulary enumerates every operator any layout can ground (26 keys, 26 doors, 10 items, the exit, and one
+id for all of the paper's ``Move`` operators: ψ(Move(c → c')) is that id with target c', the paper's "Move to
+cell (r',c')"), so a model trained on one layout reads the same ids on another. Id 0, ``none``, marks frames that serve no
 sub-goal (the tail of an exploration episode after its last achieved effect).
 """
 
@@ -12,7 +13,7 @@ from dataclasses import dataclass
 
 from hnsdt.envs.layout import Cell
 from hnsdt.symbolic.operators import (
-    GOTO_DOOR, GOTO_EXIT, GOTO_ITEM, GOTO_KEY, OPEN_DOOR, PICK_ITEM, PICK_KEY, Operator,
+    GOTO_DOOR, GOTO_EXIT, GOTO_ITEM, GOTO_KEY, MOVE, OPEN_DOOR, PICK_ITEM, PICK_KEY, Operator,
 )
 
 NONE_ID = 0
@@ -20,7 +21,7 @@ NONE_NAME = "none"
 _SYMBOLS = {
     GOTO_KEY: string.ascii_lowercase, PICK_KEY: string.ascii_lowercase,
     GOTO_DOOR: string.ascii_uppercase, OPEN_DOOR: string.ascii_uppercase,
-    GOTO_ITEM: string.digits, PICK_ITEM: string.digits, GOTO_EXIT: ("exit",),
+    GOTO_ITEM: string.digits, PICK_ITEM: string.digits, GOTO_EXIT: ("exit",), MOVE: ("",),
 }
 _BASE: dict[str, int] = {}
 _next = 1
@@ -30,7 +31,7 @@ for _kind, _symbols in _SYMBOLS.items():
 VOCAB_SIZE = _next
 _NAME_FORMAT = {
     GOTO_KEY: "GoTo(key {})", PICK_KEY: "PickKey({})", GOTO_DOOR: "GoTo(door {})", OPEN_DOOR: "OpenDoor({})",
-    GOTO_ITEM: "GoTo(item {})", PICK_ITEM: "PickItem({})", GOTO_EXIT: "GoTo(exit)",
+    GOTO_ITEM: "GoTo(item {})", PICK_ITEM: "PickItem({})", GOTO_EXIT: "GoTo(exit)", MOVE: "Move{}",
 }
 ID_TO_NAME = [NONE_NAME] + [_NAME_FORMAT[k].format(sym) for k, syms in _SYMBOLS.items() for sym in syms]
 NAME_TO_ID = {name: i for i, name in enumerate(ID_TO_NAME)}
@@ -50,7 +51,7 @@ NO_SUBGOAL = SubGoal(NONE_ID, (-1, -1))
 
 
 def subgoal_id(op: Operator) -> int:
-    return _BASE[op.kind] + _SYMBOLS[op.kind].index(op.obj)
+    return _BASE[op.kind] + (0 if op.kind == MOVE else _SYMBOLS[op.kind].index(op.obj))
 
 
 def psi(op: Operator) -> SubGoal:
