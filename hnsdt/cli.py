@@ -75,10 +75,36 @@ def cmd_collect(args) -> None:
     from hnsdt.config import collect_config, load_params
     from hnsdt.data.collect import collect_dataset
 
-    cfg = collect_config(load_params(args.params), args.env)
+    from hnsdt.provenance import git_revision, params_digest
+
+    params = load_params(args.params)
+    cfg = collect_config(params, args.env)
     out = Path(args.out or f"data/datasets/{args.env}")
-    root = collect_dataset(cfg, out, args.repo_id or f"local/{args.env}", progress=not args.quiet)
+    provenance = {"git_revision": git_revision(), "params_digest": params_digest(params)}  # into the card
+    root = collect_dataset(cfg, out, args.repo_id or f"local/{args.env}", progress=not args.quiet,
+                           provenance=provenance)
     print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
+
+
+def cmd_dataset_push(args) -> None:
+    """Upload a collected dataset to the Hugging Face Hub (or, with --dry-run, list what would go)."""
+    import os
+
+    os.environ.setdefault("HF_HUB_OFFLINE", "0")  # the library reads datasets offline; pushing needs the Hub
+    from hnsdt.data.card import push_dataset, push_plan
+
+    root = Path(args.root or f"data/datasets/{args.env}")
+    if "/" not in args.repo_id:
+        raise ValueError(f"--repo-id must be OWNER/NAME, got {args.repo_id!r}")
+    files, card = push_plan(root, args.repo_id)
+    if args.dry_run:
+        print(f"would upload {len(files)} files from {root} to https://huggingface.co/datasets/{args.repo_id}"
+              f"{' (private)' if args.private else ''}, tagged with the LeRobot codebase version:")
+        print("\n".join(f"  {f}" for f in files))
+        print(f"with the card (README.md, {len(card.splitlines())} lines) that {root / 'README.md'} holds")
+        return
+    push_dataset(root, args.repo_id, private=args.private)
+    print(f"pushed {root} -> https://huggingface.co/datasets/{args.repo_id}")
 
 
 def cmd_train(args) -> None:
@@ -130,9 +156,6 @@ def cmd_report(args) -> None:
 
 
 def cmd_replay(args) -> None:
-    import shutil
-    import subprocess
-
     import pandas as pd
 
     if args.dataset is not None:
@@ -142,34 +165,55 @@ def cmd_replay(args) -> None:
         out = Path(args.out or f"{Path(args.dataset).name}-ep{args.episode}.rrd")
         write_rrd(out, rec, episode_index=args.episode)
         write_mcap(out.with_suffix(".mcap"), rec)
-        paths = [out, out.with_suffix(".mcap")]
         print(f"episode {args.episode} of {args.dataset}: {rec.length} frames, success={rec.success}, "
               f"sub-goals: {' -> '.join(s[0] for s in rec.segments) or 'none'}")
-    else:
-        table_path = Path(args.results) / "episodes.csv"
-        if not table_path.is_file():
-            raise FileNotFoundError(f"{table_path}: no evaluation results (run `dvc repro evaluate`)")
-        table = pd.read_csv(table_path, keep_default_na=False)
-        row = table[table.episode_id == args.episode_id]
-        if row.empty:
-            raise ValueError(f"no episode {args.episode_id!r} in {table_path} (ids look like "
+        print(f"  {out}\n  {out.with_suffix('.mcap')}")
+        print(f"open with: rerun {out}   (or load {out.with_suffix('.mcap')} in Foxglove)")
+        if args.open:
+            _open_in_rerun([out])
+        return
+    table_path = Path(args.results) / "episodes.csv"
+    if not table_path.is_file():
+        raise FileNotFoundError(f"{table_path}: no evaluation results (run `dvc repro evaluate`)")
+    table = pd.read_csv(table_path, keep_default_na=False)
+    pattern = args.episode_id
+    rows = table[table.episode_id == pattern]
+    if rows.empty and any(c in pattern for c in "*?["):  # several episodes, to compare side by side
+        import fnmatch
+
+        rows = table[[fnmatch.fnmatchcase(i, pattern) and bool(r) for i, r in zip(table.episode_id, table.rrd)]]
+        if rows.empty:
+            raise ValueError(f"no recorded episode matches {pattern!r} in {table_path} (ids look like "
                              f"{table.episode_id.iloc[0]!r})")
-        row = row.iloc[0]
+    elif rows.empty:
+        raise ValueError(f"no episode {pattern!r} in {table_path} (ids look like {table.episode_id.iloc[0]!r}; a "
+                         "pattern such as '*/keydoor/fp0.1/seed0/ep0' selects several)")
+    for row in rows.itertuples():
         print(f"{row.episode_id}: success={row.success}, steps={row.steps}, reward={row.reward}, "
               f"replans={row.replans}")
-        if not row.rrd:
-            raise ValueError(f"episode {args.episode_id} was not recorded (logs.episodes_per_cell in params.yaml "
-                             "sets how many episodes per cell are; recorded ones have rrd/mcap in episodes.csv)")
-        paths = [Path(args.results).parent / row.rrd, Path(args.results).parent / row.mcap]
-    for p in paths:
-        print(f"  {p}")
-    print(f"open with: rerun {paths[0]}   (or load {paths[1]} in Foxglove)")
+    if (rows.rrd == "").any():
+        raise ValueError(f"episode {pattern} was not recorded (logs.episodes_per_cell in params.yaml sets how many "
+                         "episodes per cell are; recorded ones have rrd/mcap in episodes.csv)")
+    base = Path(args.results).parent
+    rrds = [base / r for r in rows.rrd]
+    for r, m in zip(rows.rrd, rows.mcap):
+        print(f"  {base / r}\n  {base / m}")
+    layout = base / "recordings" / "foxglove_layout.json"
+    print(f"open with: rerun {' '.join(map(str, rrds))}   (or load the .mcap in Foxglove"
+          + (f", with the layout {layout})" if layout.is_file() else ")"))
     if args.open:
-        viewer = shutil.which("rerun")
-        if viewer is None:
-            raise FileNotFoundError("the rerun viewer is not on PATH (it ships with rerun-sdk in .venv/bin)")
-        subprocess.Popen([viewer, str(paths[0])])
+        _open_in_rerun(rrds)
 
+
+def _open_in_rerun(rrds: list[Path]) -> None:
+    """One viewer holding every recording (each has its own recording id, so they sit side by side)."""
+    import shutil
+    import subprocess
+
+    viewer = shutil.which("rerun")
+    if viewer is None:
+        raise FileNotFoundError("the rerun viewer is not on PATH (it ships with rerun-sdk in .venv/bin)")
+    subprocess.Popen([viewer, *map(str, rrds)])
 
 LEARNED_NAMES = ("hnsdt", "pure_dt", "hnsdt_paper", "pure_dt_paper", "lstm_hier", "gru", "dqn", "options")  # = hnsdt.methods.LEARNED, kept
 # literal so `--help` does not import the library
@@ -234,6 +278,17 @@ def build_parser() -> argparse.ArgumentParser:
     _compute_arguments(p)
     p.set_defaults(func=cmd_train)
 
+    p = sub.add_parser("dataset", help="share a collected dataset")
+    dsub = p.add_subparsers(dest="dataset_command", required=True, metavar="ACTION")
+    q = dsub.add_parser("push", help="upload a dataset to the Hugging Face Hub with LeRobot's push_to_hub")
+    q.add_argument("env", help="env name; the dataset is data/datasets/ENV unless --root")
+    q.add_argument("--repo-id", required=True, help="OWNER/NAME on the Hub")
+    q.add_argument("--private", action="store_true", help="create the Hub repository private")
+    q.add_argument("--root", help="dataset folder (default: data/datasets/ENV)")
+    q.add_argument("--dry-run", action="store_true", help="list the files and the card that would be "
+                   "uploaded; no network")
+    q.set_defaults(func=cmd_dataset_push)
+
     p = sub.add_parser("evaluate", help="evaluate every method x env x fail_prob x seed (the `evaluate` stage)")
     p.add_argument("--models", default="models", help="checkpoint root (default: models)")
     p.add_argument("--out", default="results", help="results folder (default: results)")
@@ -250,7 +305,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("replay", help="find or render the recording of an episode (.rrd for rerun, .mcap for "
                        "Foxglove)")
     p.add_argument("episode_id", nargs="?", help="an evaluated episode id from results/episodes.csv, e.g. "
-                   "hnsdt/keydoor/fp0.1/seed0/ep0")
+                   "hnsdt/keydoor/fp0.1/seed0/ep0, or a pattern for several, e.g. '*/keydoor/fp0.1/seed0/ep0' "
+                   "(every method's recorded episode of one env x fail_prob, to compare side by side)")
     p.add_argument("--results", default="results")
     p.add_argument("--dataset", help="instead, render an episode of this collected LeRobot dataset folder")
     p.add_argument("--episode", type=int, default=0, help="with --dataset: the episode index")

@@ -151,6 +151,9 @@ def collect_config(params: dict, name: str) -> CollectConfig:
             behaviours.append(Behaviour(b.get("policy"), episodes, b.get("start", "layout"), float(eps)))
         except ValueError as e:
             raise _fail(params, f"collect.behaviours[{i}].{e}") from None
+    render = _get(params, "collect.render", int, 0)
+    if not 0 <= render <= 64:
+        raise _fail(params, f"collect.render must be 0 (no images) or pixels per cell up to 64, got {render}")
     fps = _get(params, "collect.fps", int, 10)
     if fps < 1:
         raise _fail(params, f"collect.fps must be >= 1, got {fps}")
@@ -158,6 +161,7 @@ def collect_config(params: dict, name: str) -> CollectConfig:
         env_id=env["id"], layout=env["layout"], max_steps=env["max_steps"],
         fail_probs=fail_probs(params, "collect.fail_probs"), behaviours=behaviours,
         seed=_get(params, "collect.seed", int), fps=fps, executor=executor_config(params),
+        license=_get(params, "collect.license", str, "apache-2.0"), render=render,
     )
 
 

@@ -16,9 +16,10 @@ def git_revision(cwd: str | Path = ".") -> str:
                              check=True).stdout.strip()
     except (subprocess.CalledProcessError, FileNotFoundError):
         return "unknown (not a git checkout with commits)"
-    # dvc.lock does not count: `dvc repro` rewrites it after every stage, this one included
+    # what the pipeline itself writes into git does not count: `dvc repro` rewrites dvc.lock after every stage,
+    # and the evaluate stage the small summaries under metrics/ (outputs with `cache: false`)
     dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", ":(top)",
-                            ":(top,exclude)dvc.lock"],
+                            ":(top,exclude)dvc.lock", ":(top,exclude)metrics"],
                            cwd=cwd, capture_output=True, text=True).stdout.strip()
     return rev + ("-dirty" if dirty else "")
 

@@ -95,6 +95,7 @@ PARAM_CASES = {
     "unknown behaviour policy": ({"collect.behaviours.0.policy": "teleport"}, COLLECT, "policy must be one of"),
     "unknown executor mode": ({"planner.mode": "astar"}, COLLECT, "planner.mode must be one of"),
     "unknown operator set": ({"planner.operators": "teleport"}, COLLECT, "planner.operators must be one of"),
+    "negative render size": ({"collect.render": -4}, COLLECT, "collect.render must be 0"),
     "unknown paper-arm operators": ({"planner.paper.operators": "jump"}, EVALUATE,
                                     "planner.paper.operators must be one of"),
     "unknown arm": ({"planner.papr": {"mode": "bfs"}}, COLLECT, "planner: unknown keys ['papr']"),

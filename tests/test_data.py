@@ -1,6 +1,8 @@
 import json
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -159,3 +161,71 @@ def test_corrupt_or_missing_datasets_fail_clearly(small_dataset, tmp_path):
         f.write_bytes(b"garbage")
     with pytest.raises(DatasetError, match="LeRobot cannot read it"):
         open_dataset(broken)
+
+
+def test_the_card_follows_the_hub_and_lerobot_conventions(small_dataset):
+    from huggingface_hub import DatasetCard
+
+    from hnsdt.data.card import BIBTEX, FEATURES, data_md5
+
+    text = (small_dataset / "README.md").read_text()
+    card = DatasetCard(text)
+    assert card.data.license == "apache-2.0" and card.data.task_categories == ["robotics"]
+    assert {"LeRobot", "MultiKeyDoor-v0"} <= set(card.data.tags)
+    pattern = card.data.configs[0]["data_files"]
+    assert list(small_dataset.glob(pattern)), f"the card's data_files {pattern} match no file"
+    info = json.loads((small_dataset / "meta/info.json").read_text())
+    documented = {name for name, _ in FEATURES}
+    assert set(info["features"]) - {"timestamp", "frame_index", "episode_index", "index", "task_index"} <= documented
+    assert all(f"| `{name}` |" in text for name in documented & (set(info["features"]) | {"task"}))
+    assert "| `observation.image` |" not in text  # not rendered: not described
+    assert BIBTEX in text and data_md5(small_dataset) in text and "params digest" in text
+    meta = json.loads((small_dataset / "meta/hnsdt.json").read_text())
+    assert meta["data_md5"] == data_md5(small_dataset) and meta["card"]["license"] == "apache-2.0"
+
+
+def test_push_lists_what_it_would_upload_and_fails_offline_with_one_line(small_dataset, tmp_path):
+    import shutil
+
+    root = tmp_path / "ds"
+    shutil.copytree(small_dataset, root)
+    before = sorted(p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file())
+    cmd = [sys.executable, "-m", "hnsdt.cli", "dataset", "push", "multikeydoor", "--root", str(root), "--repo-id",
+           "someone/multikeydoor"]
+    dry = subprocess.run([*cmd, "--dry-run"], cwd=REPO, capture_output=True, text=True)
+    assert dry.returncode == 0, dry.stderr
+    listed = [line.strip() for line in dry.stdout.splitlines() if line.startswith("  ")]
+    assert listed == before and "README.md" in listed and "meta/info.json" in listed
+    offline = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, env=dict(os.environ, HF_HUB_OFFLINE="1"))
+    lines = offline.stderr.strip().splitlines()
+    assert offline.returncode == 2 and lines == ["hnsdt: error: cannot push to the Hugging Face Hub: HF_HUB_OFFLINE "
+                                                 "is set"], offline.stderr
+    bad = subprocess.run([*cmd[:-1], "multikeydoor"], cwd=REPO, capture_output=True, text=True)
+    assert bad.returncode == 2 and "--repo-id must be OWNER/NAME" in bad.stderr
+    assert sorted(p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file()) == before
+
+
+def test_rendered_frames_load_in_stock_lerobot_and_its_visualizer(tmp_path, keydoor):
+    """`collect.render`: the grid of every frame as video, which lerobot-dataset-viz turns into a recording."""
+    from hnsdt.envs.render import render_rgb
+
+    cfg = CollectConfig("hnsdt/KeyDoor-v0", keydoor, 30, [0.0], [Behaviour("noisy_planner", 2, "layout", 0.1)],
+                        render=8)
+    root = collect_dataset(cfg, tmp_path / "ds", "local/rendered", progress=False)
+    ds = LeRobotDataset("local/rendered", root=root)
+    assert ds.meta.video_keys == ["observation.image"]
+    frame = ds[5]
+    image = (frame["observation.image"].permute(1, 2, 0).numpy() * 255).round()
+    drawn = render_rgb(keydoor, frame["observation.state"].numpy(), 8).astype(float)
+    assert image.shape == drawn.shape == (40, 40, 3)
+    assert np.abs(image - drawn).mean() < 8  # lossy video, but the same picture
+    assert "| `observation.image` |" in (root / "README.md").read_text()
+    out = subprocess.run([str(Path(sys.executable).parent / "lerobot-dataset-viz"), "--repo-id", "local/rendered",
+                          "--root", str(root), "--episode-index", "1", "--save", "1", "--output-dir",
+                          str(tmp_path / "viz")], capture_output=True, text=True, env=dict(os.environ, HF_HUB_OFFLINE="1"))
+    assert out.returncode == 0, out.stderr[-2000:]
+    rrd = list((tmp_path / "viz").glob("*.rrd"))
+    assert len(rrd) == 1 and rrd[0].stat().st_size > 10_000
+    shown = subprocess.run([str(Path(sys.executable).parent / "rerun"), "rrd", "print", str(rrd[0])],
+                           capture_output=True, text=True)
+    assert "observation.image" in shown.stdout + shown.stderr

@@ -61,8 +61,8 @@ def test_mcap_reads_back_with_foxglove_schemas_and_json_steps(tmp_path, keydoor)
     rec = record_from_episode("symbolic/keydoor/fp0.2/seed0/ep0", keydoor, ep)
     path = write_mcap(tmp_path / "ep.mcap", rec)
     topics, schemas, steps = {}, {}, []
-    with open(path, "rb") as f:
-        for schema, channel, message in make_reader(f).iter_messages():
+    with open(path, "rb") as f:  # the reader checks every chunk's CRC as it goes
+        for schema, channel, message in make_reader(f, validate_crcs=True).iter_messages():
             topics[channel.topic] = topics.get(channel.topic, 0) + 1
             schemas[channel.topic] = schema.name
             if channel.topic == "/step":
@@ -72,6 +72,29 @@ def test_mcap_reads_back_with_foxglove_schemas_and_json_steps(tmp_path, keydoor)
     assert [s["action"] for s in steps] == ep.actions.tolist()
     assert steps[0]["subgoal"] == "GoTo(key a)" and steps[-1]["state"] == ep.states[-2].tolist()
     assert np.isclose(steps[-1]["return"], ep.ret)
+
+
+def test_the_foxglove_layout_opens_the_recorded_topics(tmp_path, keydoor):
+    from hnsdt.logs import episode_layout, write_layout
+
+    path = write_layout(tmp_path / "layout.json")
+    layout = json.loads(path.read_text())
+    assert layout["version"] == 1 and path.read_text() == episode_layout().to_json() + "\n"
+
+    def panels(node):
+        if node.get("type") == "panel":
+            yield node
+        for item in node.get("items", []):
+            yield from panels(item["content"])
+
+    found = {p["panelType"]: p["config"] for p in panels(layout["content"])}
+    assert set(found) == {"Image", "Log", "Plot", "RawMessages"}
+    rec = record_from_episode("symbolic/keydoor/fp0.2/seed0/ep0", keydoor, _episode(keydoor))
+    with open(write_mcap(tmp_path / "ep.mcap", rec), "rb") as f:
+        topics = {c.topic for c in make_reader(f).get_summary().channels.values()}
+    named = {found["Image"]["imageMode"]["imageTopic"], found["Log"]["topicToRender"],
+             found["RawMessages"]["topicPath"], found["Plot"]["paths"][0]["value"].split(".")[0]}
+    assert named == topics == {"/grid", "/events", "/step"}
 
 
 def test_replay_renders_a_dataset_episode(tmp_path, keydoor):

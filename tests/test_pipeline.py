@@ -4,6 +4,7 @@ import importlib.util
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -21,6 +22,8 @@ from tiny_repo import REPO, lock_outs, make_tiny_repo, ran_stages, run
 pytestmark = pytest.mark.slow  # (pytest-xdist runs a file on one worker, in order: `--dist loadfile`)
 BIN = Path(sys.executable).parent
 STAGES = {m: METHODS[m].stage for m in LEARNED}  # learned method -> its DVC stage
+GIT_TRACKED_OUTS = {"metrics/summary.csv", "metrics/metrics.json"}  # outputs with `cache: false`: in git, and
+# changed by a run with other params
 ENV = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")  # the log as it happens
 
 
@@ -84,12 +87,14 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     assert metrics["keydoor"]["symbolic"]["fail_0"]["success_mean"] == 1.0
     assert set(metrics["keydoor"]) == set(STAGES) | {"symbolic"}
     shown = json.loads(run(["dvc", "metrics", "show", "--json"], repo_copy))  # declared as DVC metrics
-    assert json.dumps(shown).count("success_mean") >= 7 * 1 * 2
+    assert json.dumps(shown).count("success_mean") >= len(METHODS) * 1 * 2
+    for name in ("summary.csv", "metrics.json"):  # the git-tracked copies the README's table is made from
+        assert (repo_copy / "metrics" / name).read_bytes() == (repo_copy / "results" / name).read_bytes()
     usage = pd.read_csv(repo_copy / "results/training_usage.csv")
     assert set(usage[usage.training == "online"].env_steps) == {400}
     assert (usage[usage.training == "dataset"].dataset_frames > 0).all()
     recorded = table[table.rrd != ""]
-    assert len(recorded) == 7 * 1 * 2 and all((repo_copy / p).is_file() for p in recorded.mcap)
+    assert len(recorded) == len(METHODS) * 1 * 2 and all((repo_copy / p).is_file() for p in recorded.mcap)
     report = (repo_copy / "report/report.md").read_text()
     lock = yaml.safe_load((repo_copy / "dvc.lock").read_text())
     dataset_md5 = lock["stages"]["collect@keydoor"]["outs"][0]["md5"]
@@ -98,11 +103,16 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     assert f"{rev}-dirty" not in report  # the run rewrote dvc.lock, nothing else
     assert (repo_copy / "report/figures/success_heatmap.png").stat().st_size > 10_000
     assert "figures/paradigms.png" in report and "Agreement with the paper's claims" in report
+    assert "The paper's own configuration" in report and (repo_copy / "recordings/foxglove_layout.json").is_file()
+    run(["dvc", "plots", "show", "-o", "plots_html"], repo_copy)  # offline: Vega inlined, nothing from the web
+    page = (repo_copy / "plots_html/index.html").read_text()
+    assert page.count("vegaEmbed(") >= 3 and not re.search(r"<script[^>]*\bsrc=", page)
+    shutil.rmtree(repo_copy / "plots_html")
 
     assert ran_stages(run(["dvc", "repro"], repo_copy)) == set()  # nothing changed: nothing reruns
     # a run leaves nothing for git to pick up but its lock file
     status = run(["git", "status", "--porcelain", "--untracked-files=all"], repo_copy).splitlines()
-    assert {line[3:] for line in status} == {"dvc.lock"}, status
+    assert {line[3:] for line in status} <= {"dvc.lock"} | GIT_TRACKED_OUTS, status
 
 
 def test_every_stage_depends_on_the_code_it_runs(repo_copy, first_run):
@@ -136,6 +146,12 @@ def test_replay_points_to_an_evaluated_episode(repo_copy):
     missing = subprocess.run([sys.executable, "-m", "hnsdt.cli", "replay", "hnsdt/keydoor/fp0.2/seed0/ep3"],
                              cwd=repo_copy, capture_output=True, text=True)
     assert missing.returncode == 2 and "was not recorded" in missing.stderr
+    cell = subprocess.run([sys.executable, "-m", "hnsdt.cli", "replay", "*/keydoor/fp0.2/seed0/ep0"],
+                          cwd=repo_copy, capture_output=True, text=True)  # every method's episode of one cell
+    assert cell.returncode == 0, cell.stderr
+    opened = cell.stdout.splitlines()[-1]
+    assert opened.startswith("open with: rerun ") and opened.count(".rrd") == len(METHODS)
+    assert "foxglove_layout.json" in opened
 
 
 def _tmp_under(folder: Path) -> bool:
@@ -185,7 +201,7 @@ def test_killed_runs_resume_to_the_same_outputs(tmp_path, repo_copy, first_run):
         assert ran_stages(run(["dvc", "repro", "--force", "--single-item", stage], repo)) == {stage}
     assert not list(repo.rglob(f"{TMP_PREFIX}*")), "temporaries of killed writes were not cleaned up"
     status = run(["git", "status", "--porcelain", "--untracked-files=all"], repo).splitlines()
-    assert {line[3:] for line in status} == {"dvc.lock"}, status
+    assert {line[3:] for line in status} <= {"dvc.lock"} | GIT_TRACKED_OUTS, status
     outs, reference = lock_outs(repo), first_run[1]
     assert outs.keys() == reference.keys()
     assert {k for k in outs if outs[k] != reference[k]} <= {"evaluate:recordings"}

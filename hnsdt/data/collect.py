@@ -17,7 +17,6 @@ files.
 
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -30,7 +29,6 @@ from hnsdt.agents.symbolic import SymbolicAgent
 from hnsdt.data.segmentation import hindsight_labels
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv
-from hnsdt.symbolic.subgoals import ID_TO_NAME
 
 POLICIES = ("random", "noisy_planner")
 STARTS = ("layout", "random")
@@ -70,6 +68,8 @@ class CollectConfig:
     seed: int = 0
     fps: int = 10
     executor: ExecutorConfig = field(default_factory=ExecutorConfig)
+    license: str = "apache-2.0"  # the dataset card's licence (a Hub licence identifier)
+    render: int = 0  # pixels per grid cell of a rendered video feature `observation.image` (0 = none)
 
 
 def random_start_states(layout: Layout, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -132,44 +132,20 @@ def _episode_record(cfg: CollectConfig, b: Behaviour, fail_prob: float, seed: in
     }
 
 
-def dataset_card(cfg: CollectConfig, episodes: list[dict], repo_id: str) -> str:
-    by_behaviour: dict[tuple[str, float], list[bool]] = {}
-    for ep in episodes:
-        m = ep["meta"]
-        by_behaviour.setdefault((m["behaviour"], m["fail_prob"]), []).append(m["success"])
-    total = sum(len(ep["actions"]) for ep in episodes)
-    lines = [
-        f"# {repo_id}", "",
-        f"Exploration data for `{cfg.env_id}` on layout `{cfg.layout.name}` (LeRobot v3.0, written by hnsdt).",
-        f"Load it offline with `LeRobotDataset({repo_id!r}, root=<this folder>)`.", "",
-        "```", cfg.layout.text.rstrip(), "```", "",
-        f"- episodes: {len(episodes)}, frames: {total}, fps: {cfg.fps}, max_steps: {cfg.max_steps}, "
-        f"seed: {cfg.seed}",
-        f"- fail_probs: {', '.join(f'{f:g}' for f in cfg.fail_probs)}", "",
-        "## Behaviour success rate", "",
-        "| behaviour | fail_prob | episodes | success |", "|---|---|---|---|",
-    ]
-    for (label, f), succ in sorted(by_behaviour.items()):
-        lines.append(f"| {label} | {f:g} | {len(succ)} | {np.mean(succ):.3f} |")
-    for key, title in (("subgoal_ids", "Coverage: frames per sub-goal (`subgoal`, GoTo operators)"),
-                       ("move_subgoal_ids", "Coverage of the paper's labelling (`move_subgoal`, Move operators)")):
-        frames = Counter(ID_TO_NAME[int(i)] for ep in episodes for i in ep[key])
-        lines += ["", f"## {title}", "", "| sub-goal | frames | share |", "|---|---|---|"]
-        for name, count in sorted(frames.items(), key=lambda kv: ID_TO_NAME.index(kv[0])):
-            lines.append(f"| {name} | {count} | {count / total:.3f} |")
-    return "\n".join(lines) + "\n"
-
-
-def collect_dataset(cfg: CollectConfig, root: str | Path, repo_id: str, progress: bool = True) -> Path:
+def collect_dataset(cfg: CollectConfig, root: str | Path, repo_id: str, progress: bool = True,
+                    provenance: dict | None = None) -> Path:
+    """Collect and write the dataset, its card citing ``provenance`` (git revision, params digest)."""
     episodes = collect_episodes(cfg, progress)
     if not episodes:
         raise ValueError("collect: no episodes requested (every behaviour has episodes: 0)")
     meta = {
         "repo_id": repo_id, "env_id": cfg.env_id, "layout": cfg.layout.name, "max_steps": cfg.max_steps,
         "fps": cfg.fps, "seed": cfg.seed, "fail_probs": list(cfg.fail_probs),
-        "behaviours": [vars(b) for b in cfg.behaviours], "executor": vars(cfg.executor),
+        "behaviours": [vars(b) for b in cfg.behaviours], "executor": vars(cfg.executor), "render": cfg.render,
     }
+    from hnsdt.data.card import card_arguments
     from hnsdt.data.lerobot_io import write_dataset  # lerobot takes seconds to import: only when writing
 
-    card = dataset_card(cfg, episodes, repo_id)
-    return write_dataset(root, repo_id, cfg.layout, episodes, cfg.fps, meta, card, progress=progress)
+    card = card_arguments(cfg, episodes, provenance or {})
+    return write_dataset(root, repo_id, cfg.layout, episodes, cfg.fps, meta, card, progress=progress,
+                         render_px=cfg.render)

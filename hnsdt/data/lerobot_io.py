@@ -16,6 +16,7 @@ move_subgoal        int64      (1,)    the paper's labelling: ψ id of the Move 
                                        operator the frame serves, in hindsight (0 = none)
 move_subgoal.target int64      (2,)    that operator's target cell (a Move's destination)
 task                string             the sub-goal's readable name, e.g. ``GoTo(key a)``
+observation.image   video      (H,W,3) optional (``collect.render`` > 0): the grid as drawn by render_rgb
 ==================  =========  ======  ==================================================================
 
 Beside LeRobot's own files, ``meta/hnsdt.json`` records the environment (id, layout text, limits), the sub-goal
@@ -46,7 +47,9 @@ datasets.disable_progress_bars()
 from lerobot.datasets import dataset_writer as _lerobot_writer  # noqa: E402
 from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
 
+from hnsdt.data.card import data_md5, render_card  # noqa: E402
 from hnsdt.envs.layout import Layout  # noqa: E402
+from hnsdt.envs.render import render_rgb  # noqa: E402
 from hnsdt.fileio import atomic_dir  # noqa: E402
 
 HNSDT_META = "meta/hnsdt.json"
@@ -58,8 +61,13 @@ class DatasetError(RuntimeError):
     """A dataset that is missing, incomplete or not one of ours; the message says which file and why."""
 
 
-def dataset_features(layout: Layout) -> dict:
-    return {
+def dataset_features(layout: Layout, render_px: int = 0) -> dict:
+    """The per-frame features; ``render_px`` > 0 adds the grid drawn at that many pixels per cell, stored as
+    video (what LeRobot's visualizers, the Hub's included, show)."""
+    image = {"observation.image": {"dtype": "video", "shape": (layout.shape[0] * render_px,
+                                                               layout.shape[1] * render_px, 3),
+                                   "names": ["height", "width", "channels"]}} if render_px else {}
+    return image | {
         "observation.state": {"dtype": "int64", "shape": (2 + layout.n_flags,), "names": layout.state_names},
         "action": {"dtype": "int64", "shape": (1,), "names": ["action"]},
         "next.reward": {"dtype": "float32", "shape": (1,), "names": ["reward"]},
@@ -89,43 +97,61 @@ def _skip_image_embedding(features: dict):
 
 
 def write_dataset(root: str | Path, repo_id: str, layout: Layout, episodes: list[dict], fps: int,
-                  meta: dict, card: str, progress: bool = False) -> Path:
+                  meta: dict, card: dict, progress: bool = False, render_px: int = 0) -> Path:
     """Write ``episodes`` (dicts with states, actions, rewards, success, subgoal_ids, subgoal_targets, their
-    ``move_`` twins and a ``meta`` row) as a LeRobot dataset at ``root``. Built in a temporary folder beside ``root`` and moved into
+    ``move_`` twins and a ``meta`` row) as a LeRobot dataset at ``root``, its card made from ``card``
+    (:func:`hnsdt.data.card.card_arguments`). Built in a temporary folder beside ``root`` and moved into
     place only when complete, so a failure leaves no half-written dataset."""
     from hnsdt.symbolic.subgoals import ID_TO_NAME
 
     root = Path(root)
-    features = dataset_features(layout)
-    with atomic_dir(root) as staging:
-        ds = LeRobotDataset.create(repo_id, fps=fps, features=features, root=staging, use_videos=False)
+    features = dataset_features(layout, render_px)
+    draw = (lambda state: render_rgb(layout, state, render_px)) if render_px else None
+    with atomic_dir(root) as staging, _quiet_video_encoder():
+        ds = LeRobotDataset.create(repo_id, fps=fps, features=features, root=staging, use_videos=bool(render_px))
         try:
             # Register the tasks in vocabulary order first, so task_index is the same on every run.
             used = sorted({int(i) for ep in episodes for i in ep["subgoal_ids"]})
             ds.meta.save_episode_tasks([ID_TO_NAME[i] for i in used])
             with _skip_image_embedding(features):
                 for ep in tqdm(episodes, desc=f"write {root.name}", unit="episode", disable=not progress):
-                    _add_episode(ds, ep, ID_TO_NAME)
+                    _add_episode(ds, ep, ID_TO_NAME, draw)
                     ds.save_episode()
         finally:
             ds.finalize()
-            del ds
+        info = ds.meta.info
+        del ds
         rows = [dict(ep["meta"], episode_index=i) for i, ep in enumerate(episodes)]
         pd.DataFrame(rows).to_parquet(staging / EPISODES_TABLE, index=False)
+        md5 = data_md5(staging)
         full_meta = dict(meta, format_version=FORMAT_VERSION, subgoal_vocabulary=ID_TO_NAME,
-                         layout_text=layout.text, state_names=layout.state_names)
+                         layout_text=layout.text, state_names=layout.state_names, card=card, data_md5=md5)
         (staging / HNSDT_META).write_text(json.dumps(full_meta, indent=2, sort_keys=True) + "\n")
-        (staging / "README.md").write_text(card)
+        (staging / "README.md").write_text(render_card(card, info, repo_id, md5))
     return root
 
 
-def _add_episode(ds: LeRobotDataset, ep: dict, names: list[str]) -> None:
+@contextlib.contextmanager
+def _quiet_video_encoder():
+    """FFmpeg (through PyAV) reports every MP4 it finishes on stderr; keep a collect's output readable."""
+    import av.logging
+
+    level = av.logging.get_level()
+    av.logging.set_level(av.logging.ERROR)
+    try:
+        yield
+    finally:
+        av.logging.set_level(level)
+
+
+def _add_episode(ds: LeRobotDataset, ep: dict, names: list[str], draw=None) -> None:
     states, actions, rewards = ep["states"], ep["actions"], ep["rewards"]
     T = len(actions)
     for t in range(T):
         last = t == T - 1
         success = last and ep["success"]
-        ds.add_frame({
+        image = {"observation.image": draw(states[t])} if draw is not None else {}
+        ds.add_frame(image | {
             "observation.state": states[t].astype(np.int64),
             "action": np.array([actions[t]], dtype=np.int64),
             "next.reward": np.array([rewards[t]], dtype=np.float32),

@@ -255,7 +255,7 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
 
     from hnsdt.executor import Compute, run_tasks
     from hnsdt.fileio import atomic_dir
-    from hnsdt.logs import record_from_episode, write_mcap, write_rrd
+    from hnsdt.logs import LAYOUT_NAME, record_from_episode, write_layout, write_mcap, write_rrd
 
     if isinstance(executor, ExecutorConfig):
         executor = {"ours": executor, "paper": replace(executor, **PAPER_PLANNER)}
@@ -279,6 +279,7 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
     with atomic_dir(out) as tmp, atomic_dir(rec_out) as rec_tmp:
         tmp.mkdir()
         rec_tmp.mkdir()
+        write_layout(rec_tmp / LAYOUT_NAME)  # Foxglove: Layouts -> Import, then open any .mcap below
         rows, seg_rows = [], []
         cells = dict(zip(groups, results))
         for method, env, fi, fail_prob, seed in [(m, e, fi, f, s) for m in settings["methods"] for e in settings["envs"]

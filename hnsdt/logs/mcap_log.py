@@ -1,5 +1,6 @@
 """An episode as an MCAP file for Foxglove: the grid as ``foxglove.RawImage``, actions and operator changes as
-``foxglove.Log``, and a JSON topic ``/step`` with state, action, sub-goal and reward."""
+``foxglove.Log``, and a JSON topic ``/step`` with state, action, sub-goal and reward; and the Foxglove layout
+that opens those topics side by side (:func:`episode_layout`, built with the SDK's ``foxglove.layouts``)."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import json
 from pathlib import Path
 
 import foxglove
+import foxglove.layouts as fl
 from foxglove.channels import LogChannel, RawImageChannel
 from foxglove.messages import Log, LogLevel, RawImage, Timestamp
 
@@ -26,6 +28,29 @@ STEP_SCHEMA = {
         "reward": {"type": "number"}, "return": {"type": "number"},
     },
 }
+
+
+LAYOUT_NAME = "foxglove_layout.json"  # written beside the recordings by the evaluate stage
+
+
+def episode_layout() -> fl.Layout:
+    """The grid on the left; on the right the executor's sub-goal changes and the actions (``/events``), the
+    return so far, and each step's full record (``/step``). Import it in Foxglove: Layouts → Import."""
+    right = [fl.LogPanel(title="sub-goals and actions", config=fl.LogConfig(topic_to_render="/events")),
+             fl.PlotPanel(title="return", config=fl.PlotConfig(paths=[fl.PlotSeries(value="/step.return",
+                                                                                    label="return")])),
+             fl.RawMessagesPanel(title="step", config=fl.RawMessagesConfig(topic_path="/step"))]
+    grid = fl.ImagePanel(title="grid", config=fl.ImageConfig(image_mode=fl.ImageModeConfig(image_topic="/grid")))
+    return fl.Layout(content=fl.SplitContainer(direction="row", items=[
+        fl.SplitItem(proportion=2, content=grid),
+        fl.SplitItem(proportion=3, content=fl.SplitContainer(
+            direction="column", items=[fl.SplitItem(content=panel) for panel in right]))]))
+
+
+def write_layout(path: str | Path) -> Path:
+    with atomic_file(path) as tmp:
+        tmp.write_text(episode_layout().to_json() + "\n")
+    return Path(path)
 
 
 def write_mcap(path: str | Path, rec: EpisodeRecord) -> Path:

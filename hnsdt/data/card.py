@@ -1,0 +1,151 @@
+"""The dataset card, in the Hugging Face Hub / LeRobot convention, and the push to the Hub.
+
+The card is LeRobot's own (``create_lerobot_dataset_card``: YAML front matter with the licence, the
+``robotics`` task category, the ``LeRobot`` tag and the parquet ``configs``; the ``meta/info.json`` structure)
+filled with what a user of these data needs: features and their meaning, the behaviours and how often they
+succeed, sub-goal coverage under both labellings, the layout, the paper's BibTeX and the provenance (git
+revision, params digest, md5 of the data files). The arguments are kept in ``meta/hnsdt.json``, so
+``hnsdt dataset push`` gives the Hub the same card LeRobot's ``push_to_hub`` would write from them.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+from hnsdt.envs.keydoor import GOAL_REWARD, STEP_REWARD
+from hnsdt.symbolic.subgoals import ID_TO_NAME
+
+BIBTEX = """@inproceedings{baheri2025hnsdt,
+  title     = {Hierarchical Neuro-Symbolic Decision Transformer},
+  author    = {Baheri, Ali and Alm, Cecilia O.},
+  booktitle = {Neural-Symbolic Learning and Reasoning (NeSy)},
+  year      = {2025}
+}"""
+FEATURES = [  # (feature, meaning); dtypes and shapes come from meta/info.json on the card
+    ("observation.state", "row, column, then one 0/1 flag per key held, door open, item held (names in info.json)"),
+    ("action", "0 up, 1 right, 2 down, 3 left, 4 pick / open"),
+    ("next.reward", f"reward of this step: {STEP_REWARD:g} per step, {GOAL_REWARD:+g} more on the step that reaches "
+                    "the exit holding every item"),
+    ("next.done", "the episode ended with this step (success or time limit)"),
+    ("next.success", "this step reached the exit holding every item"),
+    ("subgoal", "ψ id of the operator the frame serves: the planner's GoTo / Pick / Open operators, or hindsight "
+                "labels of the same for random walks (0 = none)"),
+    ("subgoal.target", "that operator's target cell (-1, -1 for none)"),
+    ("move_subgoal", "the paper's labelling (Appendix B), in hindsight: Move / PickKey / OpenDoor / PickItem"),
+    ("move_subgoal.target", "that operator's target cell (a Move's destination)"),
+    ("task", "the `subgoal`'s name, e.g. `GoTo(key a)`"),
+    ("observation.image", "the grid drawn at this step (walls, keys, doors open or closed, items, exit, the agent "
+                          "as a disc), as video; only with `collect.render` > 0"),
+]
+
+
+def description(cfg, episodes: list[dict], provenance: dict) -> str:
+    """The card's body: what the data are, how they were made, what they cover."""
+    total = sum(len(ep["actions"]) for ep in episodes)
+    by_behaviour: dict[tuple[str, float], list[bool]] = {}
+    for ep in episodes:
+        m = ep["meta"]
+        by_behaviour.setdefault((m["behaviour"], m["fail_prob"]), []).append(m["success"])
+    lines = [
+        f"Exploration data for `{cfg.env_id}` on layout `{cfg.layout.name}`, written by hnsdt, a "
+        "reproduction of *Hierarchical Neuro-Symbolic Decision "
+        "Transformer* (NeSy 2025): a stochastic key–door grid world where each move fails (the agent stays) "
+        "with probability `fail_prob`.", "",
+        "```", cfg.layout.text.rstrip(), "```", "",
+        "`@` start, `G` exit, `#` wall, `a`–`z` keys, `A`–`Z` the doors they open, `0`–`9` items to collect.", "",
+        f"- episodes: {len(episodes)}, frames: {total}, fps: {cfg.fps}, max_steps: {cfg.max_steps}, "
+        f"seed: {cfg.seed}",
+        f"- fail_probs: {', '.join(f'{f:g}' for f in cfg.fail_probs)}",
+        "- load offline: `LeRobotDataset(repo_id, root=<this folder>)`", "",
+        "### Features", "", "| feature | meaning |", "|---|---|",
+        *[f"| `{name}` | {meaning} |" for name, meaning in FEATURES
+          if name != "observation.image" or cfg.render], "",
+        "### Behaviours and their success rate", "",
+        "`random`: uniform random actions (the paper's exploration); `noisy_planner`: the symbolic planner's "
+        "shortest-path controllers with each action replaced by a random one with probability epsilon. "
+        "`start=random` starts on a random free cell with random key / door / item flags.", "",
+        "| behaviour | fail_prob | episodes | success |", "|---|---|---|---|",
+        *[f"| {label} | {f:g} | {len(s)} | {np.mean(s):.3f} |" for (label, f), s in sorted(by_behaviour.items())],
+    ]
+    for key, title in (("subgoal_ids", "Sub-goal coverage (`subgoal`, GoTo operators)"),
+                       ("move_subgoal_ids", "Sub-goal coverage of the paper's labelling (`move_subgoal`)")):
+        frames = Counter(ID_TO_NAME[int(i)] for ep in episodes for i in ep[key])
+        lines += ["", f"### {title}", "", "| sub-goal | frames | share |", "|---|---|---|"]
+        for name, count in sorted(frames.items(), key=lambda kv: ID_TO_NAME.index(kv[0])):
+            lines.append(f"| {name} | {count} | {count / total:.3f} |")
+    lines += ["", "The sub-goal vocabulary (ids → names) is `subgoal_vocabulary` in `meta/hnsdt.json`; per-episode "
+              "metadata (behaviour, fail_prob, seed, outcome) is `meta/hnsdt_episodes.parquet`.", "",
+              "### Provenance", "",
+              f"- git revision of hnsdt: `{provenance.get('git_revision', 'unknown')}`",
+              f"- params digest (sha256 of params.yaml, 16 hex): `{provenance.get('params_digest', 'unknown')}`",
+              "- md5 of the data files (`data/**/*.parquet`, in path order): `{data_md5}`"]
+    return "\n".join(lines) + "\n"
+
+
+def card_arguments(cfg, episodes: list[dict], provenance: dict) -> dict:
+    """``create_lerobot_dataset_card`` / ``push_to_hub`` arguments (kept in meta/hnsdt.json)."""
+    env = cfg.env_id.split("/")[-1]
+    return {"tags": ["hnsdt", "gridworld", "key-door", "neuro-symbolic", "decision-transformer", env],
+            "license": cfg.license, "dataset_description": description(cfg, episodes, provenance),
+            "paper": "Baheri and Alm, *Hierarchical Neuro-Symbolic Decision Transformer*, NeSy 2025",
+            "citation_bibtex": BIBTEX}
+
+
+def data_md5(root: str | Path) -> str:
+    h = hashlib.md5()
+    for path in sorted(Path(root).glob("data/**/*.parquet")):
+        h.update(path.relative_to(root).as_posix().encode())
+        h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+def render_card(arguments: dict, info, repo_id: str, md5: str) -> str:
+    """The card text: LeRobot's template filled with ``arguments`` (``info`` = the dataset's meta.info)."""
+    from lerobot.datasets.utils import create_lerobot_dataset_card
+
+    kwargs = {k: v for k, v in arguments.items() if k not in ("tags", "license")}
+    kwargs["dataset_description"] = kwargs["dataset_description"].replace("{data_md5}", md5)
+    card = create_lerobot_dataset_card(tags=arguments["tags"], dataset_info=info, license=arguments["license"],
+                                       repo_id=repo_id, **kwargs)
+    return str(card).rstrip() + "\n"
+
+
+def push_plan(root: str | Path, repo_id: str) -> tuple[list[str], str]:
+    """What ``hnsdt dataset push`` would upload: the files (as ``push_to_hub`` selects them) and the card."""
+    from hnsdt.data.lerobot_io import DatasetError, check_dataset, open_dataset
+
+    root = Path(root)
+    meta = check_dataset(root)
+    if "card" not in meta:
+        raise DatasetError(f"dataset {root}: no card arguments in meta/hnsdt.json (written before cards were "
+                           "kept; collect it again)")
+    files = sorted(p.relative_to(root).as_posix() for p in root.rglob("*")
+                   if p.is_file() and not p.relative_to(root).as_posix().startswith("images/"))
+    info = open_dataset(root, repo_id=repo_id).meta.info
+    return files, render_card(meta["card"], info, repo_id, meta["data_md5"])
+
+
+def push_dataset(root: str | Path, repo_id: str, private: bool = False) -> None:
+    """Upload with LeRobot's own ``push_to_hub`` (the card from the kept arguments, the codebase version tag);
+    any failure to reach or write to the Hub is one RuntimeError naming it."""
+    import os
+
+    from hnsdt.data.lerobot_io import check_dataset, open_dataset
+
+    meta = check_dataset(root)
+    push_plan(root, repo_id)  # the same checks as a dry run, before any network
+    if os.environ.get("HF_HUB_OFFLINE", "0").lower() in ("1", "true", "yes", "on"):
+        raise RuntimeError("cannot push to the Hugging Face Hub: HF_HUB_OFFLINE is set")
+    card = meta["card"]
+    kwargs = {k: v for k, v in card.items() if k not in ("tags", "license")}
+    kwargs["dataset_description"] = kwargs["dataset_description"].replace("{data_md5}", meta["data_md5"])
+    ds = open_dataset(root, repo_id=repo_id)
+    try:
+        ds.push_to_hub(tags=card["tags"], license=card["license"], private=private, tag_version=True, **kwargs)
+    except Exception as e:  # noqa: BLE001  (requests, huggingface_hub and lerobot raise many kinds)
+        raise RuntimeError(f"cannot push {root} to the Hugging Face Hub as {repo_id}: {type(e).__name__}: {e} "
+                           "(network? `huggingface-cli login`?)") from None

@@ -1,0 +1,35 @@
+"""The README's results table is the one the committed evaluation summary gives (tools/readme_results.py)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from conftest import REPO
+
+REPO = Path(REPO)
+sys.path.insert(0, str(REPO / "tools"))
+
+from readme_results import BEGIN, END, render, results_table  # noqa: E402
+
+
+def test_the_readme_results_table_matches_the_committed_summary():
+    out = subprocess.run([sys.executable, str(REPO / "tools/readme_results.py"), "--check"], capture_output=True,
+                         text=True)
+    assert out.returncode == 0, out.stderr
+
+
+def test_the_check_fails_when_a_number_changes():
+    summary = pd.read_csv(REPO / "metrics/summary.csv")
+    readme = (REPO / "README.md").read_text()
+    assert render(readme, results_table(summary)) == readme
+    changed = summary.copy()
+    changed.loc[0, "success_mean"] = 0.123
+    assert render(readme, results_table(changed)) != readme
+    with pytest.raises(ValueError, match="marker"):
+        render(readme.replace(BEGIN, ""), "")
+    assert END in readme
