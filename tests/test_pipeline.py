@@ -104,6 +104,12 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     assert (repo_copy / "report/figures/success_heatmap.png").stat().st_size > 10_000
     assert "figures/paradigms.png" in report and "Agreement with the paper's claims" in report
     assert "The paper's own configuration" in report and (repo_copy / "recordings/foxglove_layout.json").is_file()
+    assert "figures/environments.png" in report  # the paper's Figures 2 and 3, from the layout files
+    assert (repo_copy / "report/figures/environments.png").stat().st_size > 10_000
+    rrds = sorted((repo_copy / "recordings").rglob("*.rrd"))
+    verify = subprocess.run([str(Path(sys.executable).parent / "rerun"), "rrd", "verify", *map(str, rrds)],
+                            capture_output=True, text=True)  # every recording, by rerun's own verifier
+    assert len(rrds) == len(recorded) and verify.returncode == 0, verify.stderr[-2000:]
     run(["dvc", "plots", "show", "-o", "plots_html"], repo_copy)  # offline: Vega inlined, nothing from the web
     page = (repo_copy / "plots_html/index.html").read_text()
     assert page.count("vegaEmbed(") >= 3 and not re.search(r"<script[^>]*\bsrc=", page)

@@ -55,6 +55,37 @@ def _methods(summ: pd.DataFrame) -> list[str]:
     return [m for m in METHODS if m in present] + sorted(present - set(METHODS))
 
 
+def environment_figure(envs: dict[str, dict], path: Path) -> None:
+    """The paper's Figures 2 and 3, drawn from the layout files: walls, keys, doors, items, start and exit."""
+    from hnsdt.envs.render import COLOURS, render_rgb, symbol_grid
+    from hnsdt.symbolic.abstraction import SymbolicState
+
+    px = 40
+    fig, axes = plt.subplots(1, len(envs), figsize=(4.4 * len(envs), 5.2), squeeze=False)
+    for ax, (name, env) in zip(axes[0], envs.items()):
+        layout = env["layout"]
+        state = SymbolicState.initial(layout).to_observation(layout)
+        ax.imshow(render_rgb(layout, state, px))
+        for r, row in enumerate(symbol_grid(layout, state)):
+            for c, ch in enumerate(row):
+                label = {"@": "S", "G": "G"}.get(ch, ch if ch not in ".#" else "")
+                if label:
+                    ax.text(c * px + px / 2, r * px + px / 2, label, ha="center", va="center", fontsize=11,
+                            fontweight="bold", color="white" if ch == "@" else "black")
+        h, w = layout.shape
+        ax.set_xticks(np.arange(w) * px + px / 2, range(w))
+        ax.set_yticks(np.arange(h) * px + px / 2, range(h))
+        ax.set_title(f"{name}: {h}×{w}, {len(layout.keys)} key(s), {len(layout.doors)} door(s), "
+                     f"{len(layout.items)} item(s)", fontsize=10)
+    handles = [plt.Rectangle((0, 0), 1, 1, color=np.array(COLOURS[k]) / 255) for k in
+               ("wall", "floor", "key", "door_closed", "item", "goal", "agent")]
+    fig.legend(handles, ["wall", "floor", "key (a, b, …)", "locked door (A, B, …)", "item (1, 2, …)", "exit (G)",
+                         "agent at the start (S)"], loc="lower center", ncol=4, fontsize=9, frameon=False)
+    fig.tight_layout(rect=(0, 0.13, 1, 0.97))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def comparison_figure(summ: pd.DataFrame, path: Path) -> None:
     envs = list(dict.fromkeys(summ.env))
     fig, axes = plt.subplots(len(METRICS), len(envs), figsize=(5 * len(envs), 9), squeeze=False)
@@ -503,6 +534,10 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
     episodes[["rrd", "mcap"]] = episodes[["rrd", "mcap"]].fillna("")  # recording paths: empty when not recorded
     with atomic_dir(out) as tmp:
         (tmp / "figures").mkdir(parents=True)
+        from hnsdt.config import env_settings
+
+        layouts = {e: env_settings(params, e) for e in dict.fromkeys(summ.env)}
+        environment_figure(layouts, tmp / "figures" / "environments.png")
         comparison_figure(summ, tmp / "figures" / "comparison.png")
         heatmap_figure(summ, tmp / "figures" / "success_heatmap.png")
         paradigm_figure(summ, tmp / "figures" / "paradigms.png")
@@ -529,6 +564,11 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
             f"{int(episodes.groupby(['method', 'env', 'fail_prob', 'seed']).size().max())} episodes per cell. "
             "Metrics are computed per seed, then mean ± std over seeds.", "",
             "## Provenance (applies to every figure below)", "", *provenance, "",
+            "## The environments", "",
+            "![environments](figures/environments.png)", "",
+            "The paper's Figures 2 and 3, drawn from the layout files in `params.yaml` (`envs.<name>.layout`): the "
+            "agent starts at S and must reach the exit G holding every item; a door opens with the key of its "
+            "letter; each move fails with probability fail_prob.", "",
             "## Comprehensive comparison", "",
             "![comparison](figures/comparison.png)", "",
             "Success rate, steps of successful episodes and average reward per method across failure "
