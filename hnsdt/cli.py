@@ -96,8 +96,8 @@ def cmd_dataset_push(args) -> None:
     root = Path(args.root or f"data/datasets/{args.env}")
     if "/" not in args.repo_id:
         raise ValueError(f"--repo-id must be OWNER/NAME, got {args.repo_id!r}")
-    files, card = push_plan(root, args.repo_id)
     if args.dry_run:
+        files, card = push_plan(root, args.repo_id)
         print(f"would upload {len(files)} files from {root} to https://huggingface.co/datasets/{args.repo_id}"
               f"{' (private)' if args.private else ''}, tagged with the LeRobot codebase version:")
         print("\n".join(f"  {f}" for f in files))
@@ -215,8 +215,8 @@ def _open_in_rerun(rrds: list[Path]) -> None:
         raise FileNotFoundError("the rerun viewer is not on PATH (it ships with rerun-sdk in .venv/bin)")
     subprocess.Popen([viewer, *map(str, rrds)])
 
-LEARNED_NAMES = ("hnsdt", "pure_dt", "hnsdt_paper", "pure_dt_paper", "lstm_hier", "gru", "dqn", "options")  # = hnsdt.methods.LEARNED, kept
-# literal so `--help` does not import the library
+# = hnsdt.methods.LEARNED, kept literal so `--help` does not import the library (a test checks they agree)
+LEARNED_NAMES = ("hnsdt", "pure_dt", "hnsdt_paper", "pure_dt_paper", "lstm_hier", "gru", "dqn", "options")
 
 
 def _compute_arguments(p: argparse.ArgumentParser) -> None:

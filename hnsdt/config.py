@@ -7,7 +7,7 @@ from typing import Any
 
 import yaml
 
-from hnsdt.agents.executor import PAPER_PLANNER, ExecutorConfig
+from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.data.collect import POLICIES, Behaviour, CollectConfig
 from hnsdt.envs import ENV_IDS, LayoutError, load_layout
 from hnsdt.symbolic.operators import OPERATOR_SETS
@@ -86,7 +86,7 @@ def env_settings(params: dict, name: str) -> dict:
     return {"name": name, "id": env_id, "layout": layout, "max_steps": max_steps}
 
 
-PAPER_PLANNER = {"mode": PAPER_PLANNER["plan_mode"], "operators": PAPER_PLANNER["operators"]}  # as params keys
+PAPER_PARAMS = {"mode": "bfs", "operators": "move"}  # the paper's arm (Appendix B) unless planner.paper says else
 
 
 def executor_config(params: dict, arm: str = "ours") -> ExecutorConfig:
@@ -102,7 +102,7 @@ def executor_config(params: dict, arm: str = "ours") -> ExecutorConfig:
         if unknown:
             raise _fail(params, f"{key}: unknown keys {unknown}; expected some of {sorted(known)}")
     if arm == "paper":
-        section = section | PAPER_PLANNER | paper
+        section = section | PAPER_PARAMS | paper
         prefix = "planner.paper"
     else:
         prefix = "planner"

@@ -38,9 +38,6 @@ class ExecutorConfig:
     allowance_min: int = 6  # ... but never fewer steps than this before a replan
 
 
-PAPER_PLANNER = {"plan_mode": "bfs", "operators": "move"}  # the paper's arm (Appendix B): BFS over Move operators
-
-
 @lru_cache(maxsize=65536)
 def _still_valid(layout: Layout, state: SymbolicState, ops: tuple[Operator, ...], operators: str) -> bool:
     return is_valid_plan(layout, state, list(ops), operators)

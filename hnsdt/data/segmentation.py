@@ -36,7 +36,7 @@ def achieved_operator(layout: Layout, before: SymbolicState, after: SymbolicStat
     if after.cell == before.cell:
         return None
     if operators == "move":
-        return move(layout, before.cell, after.cell)
+        return move(before.cell, after.cell)
     cell = after.cell
     for k, c in layout.keys.items():
         if c == cell and k not in before.keys:

@@ -83,6 +83,8 @@ def make_windows(frames: Frames, ends: np.ndarray, h: int, condition: str, loss:
     frame counts once (the paper's objective). With ``window`` a segment's early steps count in several
     windows and its last step in one: harmless when every action of a segment leads to its sub-goal, biased
     towards the non-achieving actions of hindsight-labelled random walks (README, "Two arms")."""
+    if loss not in LOSS_STEPS:
+        raise ValueError(f"loss must be one of {LOSS_STEPS}, got {loss!r}")
     offsets = np.arange(h - 1, -1, -1)
     idx = ends[:, None] - offsets[None, :]
     pad = idx < frames.episode_start[ends][:, None]
@@ -105,6 +107,4 @@ def make_windows(frames: Frames, ends: np.ndarray, h: int, condition: str, loss:
         batch["loss_mask"] = ~pad
     if loss == "last":
         batch["loss_mask"][:, :-1] = False
-    elif loss != "window":
-        raise ValueError(f"loss must be one of {LOSS_STEPS}, got {loss!r}")
     return batch

@@ -10,14 +10,14 @@ each is computed per seed and then reported as mean ± std over seeds.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from hnsdt.agents.executor import PAPER_PLANNER, ExecutorConfig
+from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.agents.rollout import Episode, rollout
 from hnsdt.agents.symbolic import SymbolicAgent
 from hnsdt.envs.layout import Layout
@@ -238,9 +238,9 @@ def evaluate_run(method: str, env: str, seed: int, fail_probs: list[float], layo
     return out
 
 
-def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig | dict[str, ExecutorConfig],
-                 models_root: str | Path,
-                 out_dir: str | Path, progress: bool = True, recordings_dir: str | Path | None = None,
+def evaluate_all(settings: dict, envs: dict[str, dict], executors: dict[str, ExecutorConfig],
+                 models_root: str | Path, out_dir: str | Path, progress: bool = True,
+                 recordings_dir: str | Path | None = None,
                  compute=None, provenance: dict | None = None) -> pd.DataFrame:
     """Run every cell on ``compute``'s executor, write ``episodes.csv``, ``summary.csv``, ``metrics.json``
     under ``out_dir`` and the episode recordings (of the first seed) under ``recordings_dir`` (default:
@@ -249,17 +249,15 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
     The recordings live apart from the tables because rerun stamps every row of an ``.rrd`` with a
     time-based id: the tables are the same bytes on every run, the ``.rrd`` files cannot be.
 
-    ``executor`` is the planner settings of each arm (``{"ours": ..., "paper": ...}``); one config stands for
-    ours, with the paper's default (BFS over Move operators) for the paper's arm."""
+    ``executors`` holds the planner settings of each arm (``{"ours": ..., "paper": ...}``,
+    :func:`hnsdt.config.executor_config`)."""
     import json
 
     from hnsdt.executor import Compute, run_tasks
     from hnsdt.fileio import atomic_dir
     from hnsdt.logs import LAYOUT_NAME, record_from_episode, write_layout, write_mcap, write_rrd
 
-    if isinstance(executor, ExecutorConfig):
-        executor = {"ours": executor, "paper": replace(executor, **PAPER_PLANNER)}
-    missing = set(ARMS) - set(executor)
+    missing = set(ARMS) - set(executors)
     if missing:
         raise ValueError(f"evaluate_all: no planner settings for arm(s) {sorted(missing)}")
     out = Path(out_dir)
@@ -273,8 +271,8 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executor: ExecutorConfig
             usage.append(training_usage(models_root, env, method, seed))
         log = settings["log_episodes"] if seed == settings["seeds"][0] else 0
         tasks.append((method, env, seed, settings["fail_probs"], envs[env]["layout"], envs[env]["max_steps"],
-                      settings["episodes"], executor[lookup_method(method).arm], model, meta, settings.get("eval_epsilon", {}).get(method, 0.0),
-                      log))
+                      settings["episodes"], executors[lookup_method(method).arm], model, meta,
+                      settings.get("eval_epsilon", {}).get(method, 0.0), log))
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate", progress=progress)
     with atomic_dir(out) as tmp, atomic_dir(rec_out) as rec_tmp:
         tmp.mkdir()

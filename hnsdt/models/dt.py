@@ -118,8 +118,9 @@ class DecisionTransformer(nn.Module):
 
         states (B, h, d) int64; actions (B, h) int64 (the last one is never read); timesteps (B, h) int64;
         pad (B, h) bool marks steps before the episode began (windows are left-padded); subgoal_ids (B,) and
-        subgoal_targets (B, 2) for ``subgoal``; returns (B, h) float for ``return``; neither for ``none``. Padded steps become a
-        learned pad token, identically in training and at inference, so no attention mask is needed."""
+        subgoal_targets (B, 2) for ``subgoal``; returns (B, h) float for ``return``; neither for ``none``.
+        Padded steps become a learned pad token, identically in training and at inference, so no attention mask
+        is needed."""
         cfg = self.cfg
         B, h = actions.shape
         time = self.time_emb(timesteps.clamp(0, cfg.max_timestep))

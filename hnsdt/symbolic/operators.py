@@ -74,9 +74,9 @@ def goto(kind: str, obj: str, target: Cell, dist: int, extra_pre: frozenset[str]
     return Operator(kind, obj, target, extra_pre, frozenset(eff), dist)
 
 
-def move(layout: Layout, source: Cell, target: Cell) -> Operator:
-    """Move(source → target) between 4-neighbours; Done too when ``target`` is the exit (the goal check of the
-    planner reads the items from the state)."""
+def move(source: Cell, target: Cell) -> Operator:
+    """Move(source → target) between 4-neighbours. Done is no effect of it: the planner's goal test reads it
+    from the state the move reaches (the exit, holding every item)."""
     return Operator(MOVE, f"{source[0]},{source[1]}", target, frozenset({at(source)}), frozenset({at(target)}))
 
 
@@ -133,5 +133,5 @@ def _moves(layout: Layout, s: SymbolicState) -> list[Operator]:
     for dr, dc in MOVES:
         r, c = s.cell[0] + dr, s.cell[1] + dc
         if 0 <= r < h and 0 <= c < w and not layout.walls[r, c]:
-            ops.append(move(layout, s.cell, (r, c)))
+            ops.append(move(s.cell, (r, c)))
     return ops

@@ -164,7 +164,8 @@ def move_problem_pddl(layout: Layout, state: SymbolicState | None = None) -> str
     if state.done(layout):
         init.append("(done)")
     objects = [" ".join(n for n in name.values() if n != "p-exit") + " - place"]
-    for kind, names in (("key", [f"key-{k}" for k in layout.keys]), ("door", [f"door-{d.lower()}" for d in layout.doors]),
+    for kind, names in (("key", [f"key-{k}" for k in layout.keys]),
+                        ("door", [f"door-{d.lower()}" for d in layout.doors]),
                         ("item", [f"item-{i}" for i in layout.items])):
         if names:
             objects.append(" ".join(names) + f" - {kind}")
