@@ -11,6 +11,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from hnsdt.methods import LEARNED
+
 
 def _resolve_env(args) -> tuple[str, object, int]:
     """--env is a params env name (keydoor), or a registered id; --layout overrides the layout."""
@@ -135,7 +137,7 @@ def cmd_evaluate(args) -> None:
     from hnsdt.provenance import git_revision, params_digest
 
     params = load_params(args.params)
-    settings = evaluate_settings(params)
+    settings = evaluate_settings(params) | {"datasets": args.datasets}
     envs = {e: env_settings(params, e) for e in settings["envs"]}
     compute = compute_settings(params, args.executor, args.workers)
     provenance = {"git_revision": git_revision(), "params_digest": params_digest(params)}  # into each recording
@@ -215,8 +217,6 @@ def _open_in_rerun(rrds: list[Path]) -> None:
         raise FileNotFoundError("the rerun viewer is not on PATH (it ships with rerun-sdk in .venv/bin)")
     subprocess.Popen([viewer, *map(str, rrds)])
 
-# = hnsdt.methods.LEARNED, kept literal so `--help` does not import the library (a test checks they agree)
-LEARNED_NAMES = ("hnsdt", "pure_dt", "hnsdt_paper", "pure_dt_paper", "lstm_hier", "gru", "dqn", "options")
 
 
 def _compute_arguments(p: argparse.ArgumentParser) -> None:
@@ -268,7 +268,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("train", help="train one learned method on one env, every seed (the `train`, "
                        "`train_offline` and `train_online` stages)")
     p.add_argument("--env", required=True, help="env name from train.envs")
-    p.add_argument("--method", required=True, choices=list(LEARNED_NAMES))
+    p.add_argument("--method", required=True, choices=LEARNED, help="a learned method of the registry "
+                   "(hnsdt.methods)")
     p.add_argument("--seed", type=int, nargs="+", help="training seeds (default: train.seeds of params.yaml)")
     p.add_argument("--dataset", help="offline methods: LeRobot dataset folder (default: data/datasets/ENV)")
     p.add_argument("--out", help="checkpoints folder, one seedK/ per seed (default: models/ENV/METHOD)")
@@ -291,6 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("evaluate", help="evaluate every method x env x fail_prob x seed (the `evaluate` stage)")
     p.add_argument("--models", default="models", help="checkpoint root (default: models)")
+    p.add_argument("--datasets", default="data/datasets", help="root of the collected datasets, one folder per "
+                   "env (default: data/datasets; read for the training segment counts of Theorem 2)")
     p.add_argument("--out", default="results", help="results folder (default: results)")
     p.add_argument("--recordings", help="episode recordings folder (default: recordings beside --out)")
     p.add_argument("--quiet", action="store_true")

@@ -1,17 +1,28 @@
-"""The methods of the comparison, in one table: name, label, paradigm, how each learns, which arm.
+"""The methods of the comparison, in one registry: every fact about a method lives in its entry here.
 
 The paper's seven (Section 5) in our configuration (arm ``ours``: GoTo macro-operators with a cost-optimal
 planner, DTs trained on the noisy planner's segments, a return-conditioned pure DT), plus the paper's own
 configuration of its two transformers (arm ``paper``, Appendices B and C): HNSDT with one-cell ``Move``
 operators and BFS, trained only on random exploration labelled in hindsight, and the unconditioned pure DT.
 
-Config validation, training, evaluation and the report all read this table, so a method's name means the same
-thing everywhere.
+Config validation, the CLI, training, evaluation, checkpoints, the report and the tests all read this table;
+no other module spells a method's name. An entry names the code that implements the method as
+``"module:attribute"`` strings, imported only when used (so reading the table costs no torch import):
+
+* ``network``: the model class (its ``arch`` names the checkpoint architecture, its ``config_class`` the
+  network knobs), ``config``: the training-knob dataclass, both filled from ``params.yaml``;
+* ``trainer``: ``trainer(data, network_cfg, train_cfg, progress, desc) -> (model, curve, usage)``, where
+  ``data`` is the dataset's frames (``training="dataset"``) or ``(layout, max_steps)`` (``"online"``);
+* ``agent``: ``agent(model, meta, layout, executor, epsilon, seed)``, the batched agent that is evaluated.
+
+Adding a method: README, "Adding a method".
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import importlib
+from dataclasses import dataclass, field
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -20,35 +31,68 @@ class Method:
     label: str
     paradigm: str  # the architectural paradigm of the paper's grouped figure
     training: str  # "dataset" (offline, reads the LeRobot dataset), "online" (env interaction) or "none"
-    stage: str  # the DVC stage that trains it ("" when it needs no training)
+    stage: str  # the DVC stage group that trains it ("" when it needs no training)
+    agent: str  # "module:function" building the evaluated agent (see the module docstring)
+    network: str = ""  # "module:Class" of the trained model
+    config: str = ""  # "module:Class" of its training knobs
+    trainer: str = ""  # "module:function" that trains it
+    fixed: dict[str, Any] = field(default_factory=dict)  # network knobs the method fixes (not in params.yaml)
     condition: str = ""  # decision transformers: what conditions the model (hnsdt.models.dt.CONDITIONS)
     arm: str = "ours"  # "ours" or "paper": which planner settings (params `planner` / `planner.paper`) it uses
 
 
 PARADIGMS = ("RNN", "traditional RL", "pure transformer", "symbolic", "neuro-symbolic")
+ARMS = ("ours", "paper")
+
+_DT = dict(training="dataset", stage="train", agent="hnsdt.agents.dt_agents:make_agent",
+           network="hnsdt.models.dt:DecisionTransformer", config="hnsdt.models.train:TrainConfig",
+           trainer="hnsdt.models.train:train_decision_transformer")
+_RNN = dict(training="dataset", stage="train_offline", agent="hnsdt.agents.baselines.recurrent:make_agent",
+            network="hnsdt.models.recurrent:RecurrentPolicy",
+            config="hnsdt.agents.baselines.recurrent:RecurrentTrainConfig",
+            trainer="hnsdt.agents.baselines.recurrent:train_recurrent")
 
 METHODS = {m.name: m for m in (
-    Method("lstm_hier", "LSTM hierarchical", "RNN", "dataset", "train_offline"),
-    Method("gru", "GRU sequential", "RNN", "dataset", "train_offline"),
-    Method("dqn", "DQN", "traditional RL", "online", "train_online"),
-    Method("options", "Options (option-critic)", "traditional RL", "online", "train_online"),
-    Method("pure_dt", "Pure DT", "pure transformer", "dataset", "train", "return"),
-    Method("symbolic", "BFS + controllers", "symbolic", "none", ""),
-    Method("hnsdt", "HNSDT (ours)", "neuro-symbolic", "dataset", "train", "subgoal"),
-    Method("pure_dt_paper", "Pure DT (paper)", "pure transformer", "dataset", "train", "none", "paper"),
-    Method("hnsdt_paper", "HNSDT (paper: Move + BFS)", "neuro-symbolic", "dataset", "train", "subgoal", "paper"),
+    Method("lstm_hier", "LSTM hierarchical", "RNN", **_RNN, fixed={"cell": "lstm", "hierarchical": True}),
+    Method("gru", "GRU sequential", "RNN", **_RNN, fixed={"cell": "gru", "hierarchical": False}),
+    Method("dqn", "DQN", "traditional RL", "online", "train_online", "hnsdt.agents.baselines.dqn:make_agent",
+           "hnsdt.models.qnetwork:QNetwork", "hnsdt.agents.baselines.dqn:DQNConfig",
+           "hnsdt.agents.baselines.dqn:train_dqn"),
+    Method("options", "Options (option-critic)", "traditional RL", "online", "train_online",
+           "hnsdt.agents.baselines.options:make_agent", "hnsdt.models.qnetwork:OptionCritic",
+           "hnsdt.agents.baselines.options:OptionsConfig", "hnsdt.agents.baselines.options:train_options"),
+    Method("pure_dt", "Pure DT", "pure transformer", **_DT, condition="return"),
+    Method("symbolic", "BFS + controllers", "symbolic", "none", "", "hnsdt.agents.symbolic:make_agent"),
+    Method("hnsdt", "HNSDT (ours)", "neuro-symbolic", **_DT, condition="subgoal"),
+    Method("pure_dt_paper", "Pure DT (paper)", "pure transformer", **_DT, condition="none", arm="paper"),
+    Method("hnsdt_paper", "HNSDT (paper: Move + BFS)", "neuro-symbolic", **_DT, condition="subgoal", arm="paper"),
 )}
 
-ARMS = ("ours", "paper")
+PROPOSED = "hnsdt"  # the paper's method: the theorems' subject and the report's reference line
 PAPER_ARM = {"hnsdt": "hnsdt_paper", "pure_dt": "pure_dt_paper"}  # each of our transformers -> the paper's build
-DT_METHODS = tuple(m.name for m in METHODS.values() if m.condition)  # decision transformers (stage `train`)
-DT_CONDITION = {m.name: m.condition for m in METHODS.values() if m.condition}  # (hnsdt.models.dt)
-OFFLINE_BASELINES = ("lstm_hier", "gru")  # recurrent behaviour cloning (stage `train_offline`)
-ONLINE_BASELINES = ("dqn", "options")  # reinforcement learning on the environment (stage `train_online`)
-LEARNED = DT_METHODS + OFFLINE_BASELINES + ONLINE_BASELINES
+DT_METHODS = tuple(m.name for m in METHODS.values() if m.stage == "train")  # configured under `train`
+OFFLINE_BASELINES = tuple(m.name for m in METHODS.values() if m.stage == "train_offline")  # `baselines.offline`
+ONLINE_BASELINES = tuple(m.name for m in METHODS.values() if m.stage == "train_online")  # `baselines.online`
+BASELINES = OFFLINE_BASELINES + ONLINE_BASELINES  # configured under `baselines.<name>`
+LEARNED = DT_METHODS + BASELINES
+STAGES = {"train": DT_METHODS, "train_offline": OFFLINE_BASELINES, "train_online": ONLINE_BASELINES}
 
 
 def method(name: str) -> Method:
     if name not in METHODS:
         raise ValueError(f"unknown method {name!r}; expected one of {', '.join(METHODS)}")
     return METHODS[name]
+
+
+def resolve(ref: str) -> Any:
+    """The object a ``"module:attribute"`` reference of the registry names."""
+    module, _, attr = ref.partition(":")
+    return getattr(importlib.import_module(module), attr)
+
+
+def architectures() -> dict[str, str]:
+    """Checkpoint architecture name -> model class reference, over every registered network."""
+    out = {}
+    for ref in dict.fromkeys(m.network for m in METHODS.values() if m.network):
+        out[resolve(ref).arch] = ref
+    return out

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hnsdt.methods import DT_CONDITION, DT_METHODS, METHODS
+from hnsdt.methods import METHODS, resolve
 
 
 def plan_runs(params: dict, env: str, method: str, seeds: list[int], dataset: Path) -> list[tuple]:
@@ -31,11 +31,11 @@ def plan_runs(params: dict, env: str, method: str, seeds: list[int], dataset: Pa
         # read once, shipped to every seed's task, with the sub-goal labels of the method's operators
         frames = load_frames(dataset, method_executor(params, method).operators)
     runs = []
-    if method in DT_METHODS:
+    if METHODS[method].stage == "train":  # a decision transformer: knobs under `train` and `models`
         ts = train_settings(params)
         if method not in ts["methods"]:
             raise ValueError(f"method {method!r} is not in train.methods {ts['methods']}")
-        model_cfg = model_config(params, env, DT_CONDITION[method])
+        model_cfg = model_config(params, env, METHODS[method].condition)
         if model_cfg.condition == "subgoal":
             _check_operator_coverage(frames, params, env, method, ts["behaviours"][method])
         starts = np.unique(frames.episode_start)
@@ -44,7 +44,7 @@ def plan_runs(params: dict, env: str, method: str, seeds: list[int], dataset: Pa
             cfg = replace(ts["config"], seed=seed, behaviours=ts["behaviours"][method], loss=ts["loss"][method])
             runs.append((method, seed, model_cfg, cfg, frames, facts))
         return runs
-    kind = "offline" if training == "dataset" else "online"
+    kind = "offline" if training == "dataset" else "online"  # a baseline: knobs under `baselines.<method>`
     listed = baseline_lists(params)[kind]
     if method not in listed:
         raise ValueError(f"method {method!r} is not in baselines.{kind} {listed}")
@@ -84,27 +84,9 @@ def _check_operator_coverage(frames, params: dict, env: str, method: str, behavi
 def train_run(method: str, seed: int, model_cfg, train_cfg, data, facts: dict, progress: bool = False):
     """Train one seed from scratch: ``(model, checkpoint facts, curve)``."""
     desc = f"{method} seed {seed}"
-    if method in DT_METHODS:
-        from hnsdt.data.windows import window_ends
-        from hnsdt.models.train import train_dt
-
-        model, curve = train_dt(data, model_cfg, train_cfg, progress=progress, desc=desc)
-        used = np.isin(data.policy, list(train_cfg.behaviours)) if train_cfg.behaviours else np.ones(len(data), bool)
-        windows = len(window_ends(data, model_cfg.condition, train_cfg.behaviours))
-        usage = {"dataset_frames": int(used.sum()), "windows_seen": curve[-1]["windows_seen"],
-                 "gradient_steps": curve[-1]["step"], "epochs": round(curve[-1]["windows_seen"] / windows, 3)}
-    elif METHODS[method].training == "dataset":
-        from hnsdt.agents.baselines.recurrent import train_recurrent
-
-        model, curve, usage = train_recurrent(data, model_cfg, train_cfg, progress=progress, desc=desc)
-        usage["epochs"] = round(usage["frames_seen"] / usage["dataset_frames"], 3)
-    else:
-        if method == "dqn":
-            from hnsdt.agents.baselines.dqn import train_dqn as train
-        else:
-            from hnsdt.agents.baselines.options import train_options as train
-        layout, max_steps = data
-        model, curve, usage = train(layout, max_steps, model_cfg, train_cfg, progress=progress, desc=desc)
+    trainer = resolve(METHODS[method].trainer)
+    args = data if METHODS[method].training == "online" else (data,)  # online: (layout, max_steps)
+    model, curve, usage = trainer(*args, model_cfg, train_cfg, progress=progress, desc=desc)
     model.cpu()
     return model, {"seed": seed, **facts, "train": asdict(train_cfg), "usage": usage, "curve": curve}, curve
 

@@ -1,6 +1,6 @@
 """DVC stage `collect@ENV`: exploration data for one environment as a LeRobot dataset.
 
-Usage: python pipeline/collect.py ENV   (ENV is a key of `envs` in params.yaml)
+Usage: python pipeline/collect.py --env ENV --out data/datasets/ENV   (`hnsdt collect --help` lists the options)
 """
 
 import sys
@@ -12,7 +12,4 @@ pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 from hnsdt.cli import main  # noqa: E402
 
 if __name__ == "__main__":
-    if len(sys.argv) != 2:
-        sys.exit("usage: python pipeline/collect.py ENV")
-    env = sys.argv[1]
-    sys.exit(main(["collect", "--env", env, "--out", f"data/datasets/{env}", "--repo-id", f"local/{env}"]))
+    sys.exit(main(["collect", *sys.argv[1:]]))

@@ -1,11 +1,13 @@
 """DVC stage `evaluate`: every method x env x fail_prob x seed; metrics, per-episode table, recordings.
 
-Usage: python pipeline/evaluate.py
-Reads models/ and data/datasets/; writes results/ (tables), recordings/ (.rrd, .mcap) and metrics/ (a copy of
-results/summary.csv and results/metrics.json, small and kept in git: the README's results table is generated
-from it, and `dvc metrics show` / `dvc plots show` work on a fresh clone).
+Usage: python pipeline/evaluate.py --models models --datasets data/datasets --out results --recordings recordings
+       --metrics metrics   (`hnsdt evaluate --help` lists the other options)
+Writes the tables to OUT, the .rrd / .mcap episodes to RECORDINGS, and copies OUT's summary.csv and
+metrics.json to METRICS: small and kept in git, so the README's results table is generated from them and
+`dvc metrics show` / `dvc plots show` work on a fresh clone.
 """
 
+import argparse
 import shutil
 import sys
 
@@ -17,9 +19,13 @@ from hnsdt.cli import main  # noqa: E402
 from hnsdt.fileio import atomic_file  # noqa: E402
 
 if __name__ == "__main__":
-    status = main(["evaluate", "--models", "models", "--out", "results"])
+    parser = argparse.ArgumentParser(add_help=False)
+    parser.add_argument("--metrics", required=True)
+    parser.add_argument("--out", required=True)
+    ours, rest = parser.parse_known_args()
+    status = main(["evaluate", "--out", ours.out, *rest])
     if not status:
         for name in ("summary.csv", "metrics.json"):
-            with atomic_file(f"metrics/{name}") as tmp:
-                shutil.copyfile(f"results/{name}", tmp)
+            with atomic_file(f"{ours.metrics}/{name}") as tmp:
+                shutil.copyfile(f"{ours.out}/{name}", tmp)
     sys.exit(status)

@@ -1,8 +1,9 @@
 """DVC stages `train`, `train_offline` and `train_online`: one learned method on one env, every seed of
 train.seeds in this one process.
 
-Usage: python pipeline/train.py ENV METHOD
-Writes models/ENV/METHOD/seedK/{model.safetensors,config.json} and plots/train/ENV-METHOD/seedK.csv.
+Usage: python pipeline/train.py --env ENV --method METHOD [--dataset data/datasets/ENV] --out models/ENV/METHOD
+       --curves plots/train/ENV-METHOD   (`hnsdt train --help` lists the options)
+Writes OUT/seedK/{model.safetensors,config.json} and CURVES/seedK.csv.
 """
 
 import sys
@@ -14,8 +15,4 @@ pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 from hnsdt.cli import main  # noqa: E402
 
 if __name__ == "__main__":
-    if len(sys.argv) != 3:
-        sys.exit("usage: python pipeline/train.py ENV METHOD")
-    env, method = sys.argv[1:]
-    sys.exit(main(["train", "--env", env, "--method", method, "--out", f"models/{env}/{method}",
-                   "--curves", f"plots/train/{env}-{method}"]))
+    sys.exit(main(["train", *sys.argv[1:]]))

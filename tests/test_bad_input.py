@@ -84,25 +84,25 @@ def _outputs(root: Path) -> set[str]:
 COLLECT = ["collect", "--env", "keydoor", "--out", "out", "--quiet"]
 EVALUATE = ["evaluate", "--out", "res", "--recordings", "rec", "--quiet"]
 PARAM_CASES = {
-    "wrong type": ({"envs.keydoor.max_steps": "ten"}, COLLECT, "envs.keydoor.max_steps must be int"),
+    "wrong type": ({"envs.keydoor.max_steps": "ten"}, COLLECT, "envs.keydoor.max_steps: Input should be a valid integer"),
     "unknown top-level key": ({"colect": {"seed": 1}}, COLLECT, "unknown section(s) ['colect']"),
-    "unknown behaviour key": ({"collect.behaviours.0.episods": 3}, COLLECT, "unknown keys ['episods']"),
-    "negative episodes": ({"collect.behaviours.0.episodes": -5}, COLLECT, "episodes must be >= 0, got -5"),
+    "unknown behaviour key": ({"collect.behaviours.0.episods": 3}, COLLECT, "unknown key collect.behaviours.0.episods"),
+    "negative episodes": ({"collect.behaviours.0.episodes": -5}, COLLECT, "collect.behaviours.0.episodes: Input should be greater than or equal to 0, got -5"),
     "fail_prob above 1": ({"collect.fail_probs": [0.1, 1.5]}, COLLECT, "collect.fail_probs"),
     "fail_prob below 0": ({"evaluate.fail_probs": [-0.1]}, EVALUATE, "evaluate.fail_probs"),
     "unknown env id": ({"envs.keydoor.id": "hnsdt/Nope-v0"}, COLLECT, "not a registered id"),
-    "unknown method": ({"evaluate.methods": ["symbolic", "ppo"]}, EVALUATE, "['ppo']"),
-    "unknown behaviour policy": ({"collect.behaviours.0.policy": "teleport"}, COLLECT, "policy must be one of"),
-    "unknown executor mode": ({"planner.mode": "astar"}, COLLECT, "planner.mode must be one of"),
-    "unknown operator set": ({"planner.operators": "teleport"}, COLLECT, "planner.operators must be one of"),
-    "negative render size": ({"collect.render": -4}, COLLECT, "collect.render must be 0"),
+    "unknown method": ({"evaluate.methods": ["symbolic", "ppo"]}, EVALUATE, "evaluate.methods.1: Input should be 'lstm_hier'"),
+    "unknown behaviour policy": ({"collect.behaviours.0.policy": "teleport"}, COLLECT, "collect.behaviours.0.policy: Input should be 'random' or 'noisy_planner', got 'teleport'"),
+    "unknown executor mode": ({"planner.mode": "astar"}, COLLECT, "planner.mode: Input should be 'bfs' or 'cost'"),
+    "unknown operator set": ({"planner.operators": "teleport"}, COLLECT, "planner.operators: Input should be"),
+    "negative render size": ({"collect.render": -4}, COLLECT, "collect.render: Input should be greater than or equal to 0"),
     "unknown paper-arm operators": ({"planner.paper.operators": "jump"}, EVALUATE,
-                                    "planner.paper.operators must be one of"),
-    "unknown arm": ({"planner.papr": {"mode": "bfs"}}, COLLECT, "planner: unknown keys ['papr']"),
+                                    "planner.paper.operators: Input should be"),
+    "unknown arm": ({"planner.papr": {"mode": "bfs"}}, COLLECT, "unknown key planner.papr"),
     "empty seed list": ({"train.seeds": []}, EVALUATE, "train.seeds"),
     "missing section": ({"collect": DELETE}, COLLECT, "missing key collect"),
-    "unknown executor": ({"compute.executor": "slurm"}, EVALUATE, "compute.executor must be one of"),
-    "zero threads": ({"compute.threads": 0}, EVALUATE, "threads >= 1"),
+    "unknown executor": ({"compute.executor": "slurm"}, EVALUATE, "compute.executor: Input should be 'local' or 'ray'"),
+    "zero threads": ({"compute.threads": 0}, EVALUATE, "compute.threads: Input should be greater than or equal to 1"),
 }
 
 

@@ -33,7 +33,7 @@ BAD_PARAMS = [
     ("envs:\n  keydoor:\n    id: hnsdt/Nope-v0\n    layout: keydoor_5x5\n    max_steps: 10\n", "not a registered id"),
     ("envs:\n  keydoor:\n    id: hnsdt/KeyDoor-v0\n    layout: '@a#G'\n    max_steps: 10\n", "no path"),
     ("envs:\n  keydoor:\n    id: hnsdt/KeyDoor-v0\n    layout: keydoor_5x5\n    max_steps: ten\n",
-     "max_steps must be int"),
+     "envs.keydoor.max_steps: Input should be a valid integer"),
 ]
 
 
@@ -55,7 +55,7 @@ def test_unknown_behaviour_policy(tmp_path):
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump(params_dict))
     out = hnsdt("--params", str(params), "collect", "--env", "keydoor", "--out", str(tmp_path / "o"))
-    assert out.returncode == 2 and "collect.behaviours[0].policy must be one of" in out.stderr
+    assert out.returncode == 2 and "collect.behaviours.0.policy: Input should be 'random' or 'noisy_planner'" in out.stderr
 
 
 def test_unknown_env_name():

@@ -67,8 +67,6 @@ def _greedy(model: DecisionTransformer, inputs: dict[str, np.ndarray]) -> np.nda
 class HNSDTAgent(HierarchicalAgent):
     """The paper's method: the symbolic plan's current operator, as ψ(o), conditions the DT."""
 
-    name = "hnsdt"
-
     def __init__(self, layout: Layout, model: DecisionTransformer, config: ExecutorConfig | None = None):
         super().__init__(layout, config)
         self.model = model
@@ -99,8 +97,6 @@ class HNSDTAgent(HierarchicalAgent):
 class PureDTAgent:
     """The pure decision transformer baselines, no planner, no sub-goals: conditioned on return-to-go (ours,
     ``target_return`` given) or on nothing (the paper's, ``target_return=None``)."""
-
-    name = "pure_dt"
 
     def __init__(self, model: DecisionTransformer, target_return: float | None):
         self.model = model
@@ -135,3 +131,13 @@ class PureDTAgent:
 
     def finish(self) -> None:
         pass
+
+
+def make_agent(model: DecisionTransformer, meta: dict, layout: Layout, executor: ExecutorConfig,
+               epsilon: float = 0.0, seed: int = 0):
+    """The registry's agent factory (:mod:`hnsdt.methods`), by what conditions the model: a sub-goal token
+    (HNSDT, under the plan executor), the return-to-go (target: the dataset's best return) or nothing."""
+    condition = model.cfg.condition
+    if condition == "subgoal":
+        return HNSDTAgent(layout, model, executor)
+    return PureDTAgent(model, meta["target_return"] if condition == "return" else None)

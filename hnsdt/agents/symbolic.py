@@ -17,8 +17,6 @@ from hnsdt.envs.layout import MOVES, Layout
 
 
 class SymbolicAgent(HierarchicalAgent):
-    name = "symbolic"
-
     def __init__(self, layout: Layout, config: ExecutorConfig | None = None):
         super().__init__(layout, config)
         self.navigator = Navigator(layout)
@@ -38,3 +36,9 @@ class SymbolicAgent(HierarchicalAgent):
             target_idx = self.navigator.target_grid[targets[:, 0], targets[:, 1]]  # (-1, -1) rows masked below
             actions = self.navigator.controller_actions(target_idx, masks, obs[:, :2])
         return np.where(has_goal, actions, PICK)  # nothing to pursue (done or trapped): a harmless no-op
+
+
+def make_agent(model, meta: dict, layout: Layout, executor: ExecutorConfig, epsilon: float = 0.0,
+               seed: int = 0) -> SymbolicAgent:
+    """The registry's agent factory (:mod:`hnsdt.methods`): no model, the plan and the controllers."""
+    return SymbolicAgent(layout, executor)

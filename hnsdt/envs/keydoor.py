@@ -10,8 +10,9 @@ Description:
         ..#..
         a.#..
 
-Actions (Discrete(5)):
-    0 up, 1 right, 2 down, 3 left, 4 pick/open. A move fails with probability ``fail_prob`` and the agent
+Actions (Discrete(5), :class:`hnsdt.envs.dynamics.Actions`):
+    0 up, 1 right, 2 down, 3 left, 4 pick/open. The rules (:mod:`hnsdt.envs.dynamics`, shared with the vector
+    env): a move fails with probability ``fail_prob`` and the agent
     stays; walls and grid edges block. A closed door cell can be entered but not left until the door is open
     (the paper's stochastic blocking: without the key the agent is trapped). Pick/open takes the key or item on
     the agent's cell, or opens the door on it if the agent holds that door's key; otherwise it does nothing.
@@ -40,14 +41,12 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from hnsdt.envs.layout import MOVES, Layout, load_layout
+from hnsdt.envs.dynamics import ACTION_NAMES, GOAL_REWARD, N_ACTIONS, PICK, STEP_REWARD, Actions, Rules
+from hnsdt.envs.layout import Layout, load_layout
 from hnsdt.envs.render import render_ansi, render_rgb
 
-STEP_REWARD = -0.1
-GOAL_REWARD = 1.0
-PICK = 4
-N_ACTIONS = 5
-ACTION_NAMES = ("up", "right", "down", "left", "pick/open")
+__all__ = ["ACTION_NAMES", "GOAL_REWARD", "N_ACTIONS", "PICK", "STEP_REWARD", "Actions", "KeyDoorEnv",
+           "check_env_params", "observation_space_for"]
 
 
 def observation_space_for(layout: Layout) -> gym.spaces.MultiDiscrete:
@@ -82,19 +81,9 @@ class KeyDoorEnv(gym.Env):
         self.render_mode = render_mode
         self.observation_space = observation_space_for(self.layout)
         self.action_space = gym.spaces.Discrete(N_ACTIONS)
-        lay = self.layout
-        self._key_index = {cell: i for i, cell in enumerate(lay.keys.values())}
-        self._door_index = {cell: i for i, cell in enumerate(lay.doors.values())}
-        self._item_index = {cell: i for i, cell in enumerate(lay.items.values())}
-        self._door_key = [lay.door_key_index(d) for d in lay.doors]
-        self._state = self._initial_state()
+        self.rules = Rules(self.layout)
+        self._state = self.rules.initial_states(1)[0]
         self._steps = 0
-
-    # Flags live in one vector: [keys | doors | items], offset by 2 in the observation.
-    def _initial_state(self) -> np.ndarray:
-        state = np.zeros(2 + self.layout.n_flags, dtype=np.int64)
-        state[:2] = self.layout.start
-        return state
 
     @property
     def state(self) -> np.ndarray:
@@ -102,7 +91,7 @@ class KeyDoorEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        self._state = self._initial_state()
+        self._state = self.rules.initial_states(1)[0]
         if options and options.get("state") is not None:
             state = np.asarray(options["state"], dtype=np.int64)
             if state.shape != self._state.shape or not self.observation_space.contains(state):
@@ -117,35 +106,16 @@ class KeyDoorEnv(gym.Env):
         action = int(action)
         if not 0 <= action < N_ACTIONS:
             raise ValueError(f"action must be in 0..{N_ACTIONS - 1}, got {action}")
-        # One uniform draw every step, move or not, so the vectorised env can replay the same stream.
-        move_failed = action < PICK and self.np_random.random() < self.fail_prob
-        if action >= PICK:
-            self.np_random.random()
+        # One uniform draw every step, move or not: with one copy, the vector env's stream for the same seed.
+        u = np.array([self.np_random.random()])
+        success, move_failed = self.rules.step(self._state[None], np.array([action]), u, self.fail_prob,
+                                               np.ones(1, bool))
+        success, move_failed = bool(success[0]), bool(move_failed[0])
         s = self._state
-        cell = (int(s[0]), int(s[1]))
-        nk, nd = len(self.layout.keys), len(self.layout.doors)
-        if action < PICK:
-            door = self._door_index.get(cell)
-            trapped = door is not None and not s[2 + nk + door]
-            dr, dc = MOVES[action]
-            r, c = cell[0] + dr, cell[1] + dc
-            h, w = self.layout.shape
-            if not move_failed and not trapped and 0 <= r < h and 0 <= c < w and not self.layout.walls[r, c]:
-                s[0], s[1] = r, c
-        else:
-            if cell in self._key_index:
-                s[2 + self._key_index[cell]] = 1
-            elif cell in self._item_index:
-                s[2 + nk + nd + self._item_index[cell]] = 1
-            elif cell in self._door_index:
-                door = self._door_index[cell]
-                if s[2 + self._door_key[door]]:
-                    s[2 + nk + door] = 1
         self._steps += 1
-        success = (int(s[0]), int(s[1])) == self.layout.goal and bool(np.all(s[2 + nk + nd :]))
         reward = STEP_REWARD + (GOAL_REWARD if success else 0.0)
         truncated = not success and self._steps >= self.max_steps
-        return s.copy(), reward, success, truncated, {"success": success, "move_failed": bool(move_failed)}
+        return s.copy(), reward, success, truncated, {"success": success, "move_failed": move_failed}
 
     def render(self):
         if self.render_mode == "ansi":

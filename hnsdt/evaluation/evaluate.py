@@ -19,11 +19,11 @@ import pandas as pd
 
 from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.agents.rollout import Episode, rollout
-from hnsdt.agents.symbolic import SymbolicAgent
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv
 from hnsdt.methods import ARMS
 from hnsdt.methods import method as lookup_method
+from hnsdt.methods import resolve
 
 
 @dataclass
@@ -62,23 +62,8 @@ def build_agent(method: str, layout: Layout, executor: ExecutorConfig, model=Non
                 epsilon: float = 0.0, agent_seed: int = 0):
     """The batched agent of ``method`` around its trained ``model``. ``epsilon`` and ``agent_seed`` only
     matter to the online baselines (ε-greedy noise, sampled options)."""
-    if lookup_method(method).training == "none":
-        return SymbolicAgent(layout, executor)
-    condition = lookup_method(method).condition
-    if condition == "subgoal":
-        from hnsdt.agents.dt_agents import HNSDTAgent
-        return HNSDTAgent(layout, model, executor)
-    if condition:
-        from hnsdt.agents.dt_agents import PureDTAgent
-        return PureDTAgent(model, meta["target_return"] if condition == "return" else None)
-    if method in ("lstm_hier", "gru"):
-        from hnsdt.agents.baselines.recurrent import RecurrentAgent
-        return RecurrentAgent(model)
-    if method == "dqn":
-        from hnsdt.agents.baselines.dqn import DQNAgent
-        return DQNAgent(model, epsilon, agent_seed)
-    from hnsdt.agents.baselines.options import OptionsAgent
-    return OptionsAgent(model, epsilon, agent_seed)
+    entry = lookup_method(method)
+    return resolve(entry.agent)(model, meta or {}, layout, executor, epsilon, agent_seed)
 
 
 def training_usage(models_root: str | Path, env: str, method: str, seed: int) -> dict:

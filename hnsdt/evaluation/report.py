@@ -18,7 +18,7 @@ import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
 
 from hnsdt.fileio import atomic_dir  # noqa: E402
-from hnsdt.methods import PAPER_ARM, METHODS, PARADIGMS  # noqa: E402
+from hnsdt.methods import METHODS, PAPER_ARM, PARADIGMS, PROPOSED  # noqa: E402
 from hnsdt.provenance import git_revision, params_digest  # noqa: E402
 
 METHOD_LABELS = {name: m.label for name, m in METHODS.items()}
@@ -43,6 +43,17 @@ def lock_outputs(lock_path: str | Path = "dvc.lock") -> dict[str, str]:
         for out in stage.get("outs", []) or []:
             outs[out["path"]] = out.get("md5", "?")
     return outs
+
+
+def render_template(name: str, **context) -> str:
+    """A template of ``hnsdt/evaluation/templates`` filled with ``context``; an unknown name in the template is
+    an error, not an empty string."""
+    import jinja2
+
+    env = jinja2.Environment(loader=jinja2.FileSystemLoader(Path(__file__).with_name("templates")),
+                             undefined=jinja2.StrictUndefined, trim_blocks=True, lstrip_blocks=True,
+                             keep_trailing_newline=True, autoescape=False)
+    return env.get_template(name).render(**context)
 
 
 def _label(method: str) -> str:
@@ -227,7 +238,7 @@ def _optimum_table(summ: pd.DataFrame) -> str:
 
 def _target_lines(summ: pd.DataFrame) -> list[str]:
     """Issue 5's target for HNSDT: success >= 0.98 x optimal and steps <= 1.05 x optimal, in every cell."""
-    rows = summ[summ.method == "hnsdt"]
+    rows = summ[summ.method == PROPOSED]
     if rows.empty:
         return []
     met = (rows.success_ratio >= 0.98) & (rows.steps_ratio <= 1.05)
@@ -239,19 +250,11 @@ def _target_lines(summ: pd.DataFrame) -> list[str]:
     return out
 
 
-# The paper's quantitative claims (Section 5): (env, fail_prob, method, metric, mean, std). Envs: keydoor = the
-# simple case, multikeydoor = the complex one.
-PAPER_POINTS = [
-    ("keydoor", 0.1, "hnsdt", "success", 0.82, 0.05),
-    ("keydoor", 0.1, "symbolic", "success", 0.81, 0.04),
-    ("multikeydoor", 0.1, "hnsdt", "success", 0.62, 0.05),
-    ("multikeydoor", 0.1, "symbolic", "success", 0.53, 0.04),
-    ("keydoor", 0.1, "hnsdt", "steps", 48.0, 8.0),
-    ("keydoor", 0.1, "symbolic", "steps", 45.0, 6.0),
-    ("multikeydoor", 0.1, "hnsdt", "steps", 189.0, 8.0),
-    ("multikeydoor", 0.1, "symbolic", "steps", 166.0, 6.0),
-]
-NEAR_ZERO = 0.05  # "near-zero success": at most this
+CLAIMS = Path(__file__).with_name("paper_claims.yaml")  # the paper's claims, as data
+
+
+def paper_claims(path: str | Path = CLAIMS) -> dict:
+    return yaml.safe_load(Path(path).read_text())
 
 
 def _cell(summ: pd.DataFrame, env: str, fail_prob: float, method: str, metric: str = "success"):
@@ -315,7 +318,8 @@ def arm_table(table: pd.DataFrame, arm: str) -> pd.DataFrame:
 def claim_lines(summ: pd.DataFrame, view: pd.DataFrame | None = None, arm: str = "ours"
                 ) -> tuple[list[str], list[dict]]:
     """Where our measurements agree or disagree with the paper's claims, one row per claim. A point value
-    agrees when ours lies within two of the paper's standard deviations of the paper's mean. Claims about
+    agrees when ours lies within ``within_std`` of the paper's standard deviations of the paper's mean
+    (``paper_claims.yaml``). Claims about
     learners whose seeds disagree also say how many seeds solve the env (``view``, from :func:`seed_view`).
     ``arm`` picks whose HNSDT and pure DT the claims are about: ours or the paper's build (:func:`arm_table`)."""
     summ = arm_table(summ, arm)
@@ -325,25 +329,27 @@ def claim_lines(summ: pd.DataFrame, view: pd.DataFrame | None = None, arm: str =
     def _label(method: str) -> str:
         return METHOD_LABELS.get(paper_names.get(method, method), method)
 
+    claims = paper_claims()
+    near_zero, within = claims["near_zero"], claims["within_std"]
     rows = []
-    for env, fp, method, metric, mean, std in PAPER_POINTS:
-        ours, ours_std = _cell(summ, env, fp, method, metric)
+    for p in claims["points"]:
+        ours, ours_std = _cell(summ, p["env"], p["fail_prob"], p["method"], p["metric"])
         if ours is None:
             continue
-        unit = "%" if metric == "success" else " steps"
-        scale = 100 if metric == "success" else 1
-        verdict = ("no successful episode to compare" if pd.isna(ours) else "agrees" if abs(ours - mean) <= 2 * std
-                   else f"disagrees: ours is {'higher' if ours > mean else 'lower'}")
-        rows.append({"claim": f"{_label(method)} {metric} on {env} at fail_prob {fp:g}",
-                     "paper": f"{mean * scale:.0f} ± {std * scale:.0f}{unit}",
+        unit = "%" if p["metric"] == "success" else " steps"
+        scale = 100 if p["metric"] == "success" else 1
+        verdict = ("no successful episode to compare" if pd.isna(ours)
+                   else "agrees" if abs(ours - p["mean"]) <= within * p["std"]
+                   else f"disagrees: ours is {'higher' if ours > p['mean'] else 'lower'}")
+        rows.append({"claim": f"{_label(p['method'])} {p['metric']} on {p['env']} at fail_prob {p['fail_prob']:g}",
+                     "paper": f"{p['mean'] * scale:.0f} ± {p['std'] * scale:.0f}{unit}",
                      "ours": "–" if pd.isna(ours) else f"{ours * scale:.1f} ± {ours_std * scale:.1f}{unit}",
                      "verdict": verdict})
-    # "superior performance in all evaluated conditions"
-    cells = summ.groupby(["env", "fail_prob"])
+    best = claims["best_everywhere"]
     strict = tied = beaten = 0
-    for _, c in cells:
-        h = c[c.method == "hnsdt"].success_mean
-        others = c[c.method != "hnsdt"].success_mean
+    for _, c in summ.groupby(["env", "fail_prob"]):
+        h = c[c.method == best["method"]].success_mean
+        others = c[c.method != best["method"]].success_mean
         if h.empty or others.empty:
             continue
         best_other = others.max()
@@ -351,46 +357,51 @@ def claim_lines(summ: pd.DataFrame, view: pd.DataFrame | None = None, arm: str =
         tied += int(abs(h.iloc[0] - best_other) <= 1e-9)
         beaten += int(h.iloc[0] < best_other - 1e-9)
     if strict + tied + beaten:
-        rows.append({"claim": "HNSDT has the highest success in every env × fail_prob cell",
-                     "paper": "yes, in all conditions",
+        rows.append({"claim": best["claim"], "paper": best["paper"],
                      "ours": f"strictly best in {strict}, tied for best in {tied}, beaten in {beaten} of "
                              f"{strict + tied + beaten} cells",
                      "verdict": "agrees" if tied == beaten == 0 else
                      ("partly: never beaten, but tied" if beaten == 0 else "disagrees")})
-    ours, _ = _cell(summ, "multikeydoor", 0.3, "hnsdt")
-    if ours is not None:
-        rows.append({"claim": "HNSDT success on multikeydoor at fail_prob 0.3 stays above 0.56", "paper": "> 0.56",
-                     "ours": f"{ours:.3f}", "verdict": "agrees" if ours > 0.56 else "disagrees"})
-    for method in ("dqn", "pure_dt"):
-        ours, _ = _cell(summ, "multikeydoor", 0.3, method)
+    for a in claims["above"]:
+        ours, _ = _cell(summ, a["env"], a["fail_prob"], a["method"])
         if ours is not None:
-            rows.append({"claim": f"{_label(method)} collapses to near-zero success on multikeydoor at fail_prob 0.3",
-                         "paper": f"near zero (we read ≤ {NEAR_ZERO:g})",
-                         "ours": f"{ours:.3f}{_seeds_phrase(view, 'multikeydoor', method)}",
-                         "verdict": "agrees" if ours <= NEAR_ZERO else "disagrees"})
-    low = [v for m in ("dqn", "pure_dt") if (v := _cell(summ, "multikeydoor", 0.3, m)[0]) is not None]
-    high, _ = _cell(summ, "multikeydoor", 0.3, "hnsdt")
-    for method in ("options", "lstm_hier"):
-        ours, _ = _cell(summ, "multikeydoor", 0.3, method)
+            rows.append({"claim": a["claim"], "paper": f"> {a['value']:g}", "ours": f"{ours:.3f}",
+                         "verdict": "agrees" if ours > a["value"] else "disagrees"})
+    col = claims["collapse"]
+    for method in col["methods"]:
+        ours, _ = _cell(summ, col["env"], col["fail_prob"], method)
+        if ours is not None:
+            rows.append({"claim": f"{_label(method)} collapses to near-zero success on {col['env']} at fail_prob "
+                                  f"{col['fail_prob']:g}",
+                         "paper": f"near zero (we read ≤ {near_zero:g})",
+                         "ours": f"{ours:.3f}{_seeds_phrase(view, col['env'], method)}",
+                         "verdict": "agrees" if ours <= near_zero else "disagrees"})
+    mid = claims["intermediate"]
+    env, fp = mid["env"], mid["fail_prob"]
+    low = [v for m in mid["low"] if (v := _cell(summ, env, fp, m)[0]) is not None]
+    high, _ = _cell(summ, env, fp, mid["high"])
+    for method in mid["methods"]:
+        ours, _ = _cell(summ, env, fp, method)
         if ours is not None and low and high is not None:
             inside = max(low) < ours < high
-            rows.append({"claim": f"{_label(method)} is intermediate on multikeydoor at fail_prob 0.3 (between "
-                                  "DQN / pure DT and HNSDT)", "paper": "intermediate",
-                         "ours": f"{ours:.3f} (DQN / pure DT best {max(low):.3f}, HNSDT {high:.3f})"
-                                 f"{_seeds_phrase(view, 'multikeydoor', method)}",
+            rows.append({"claim": f"{_label(method)} is intermediate on {env} at fail_prob {fp:g} (between "
+                                  f"{mid['low_name']} and {mid['high_name']})", "paper": "intermediate",
+                         "ours": f"{ours:.3f} ({mid['low_name']} best {max(low):.3f}, {mid['high_name']} "
+                                 f"{high:.3f}){_seeds_phrase(view, env, method)}",
                          "verdict": "agrees" if inside else "disagrees"})
+    top_paradigm = claims["best_paradigm"]
     table = paradigm_table(summ)
     for env in dict.fromkeys(summ.env):
         t = table[table.env == env]
         best = t.groupby("paradigm").success.max()
-        if "neuro-symbolic" in best:
+        if top_paradigm in best:
             top = best[best >= best.max() - 1e-9].index.tolist()
-            rows.append({"claim": f"the neuro-symbolic paradigm has the highest success on {env} (mean over "
+            rows.append({"claim": f"the {top_paradigm} paradigm has the highest success on {env} (mean over "
                                   "fail_prob, best method of each paradigm)", "paper": "yes",
                          "ours": ", ".join(f"{p} {v:.3f}" for p, v in best.sort_values(ascending=False).items()),
-                         "verdict": "agrees" if top == ["neuro-symbolic"] else
-                         ("partly: tied with " + ", ".join(p for p in top if p != "neuro-symbolic")
-                          if "neuro-symbolic" in top else "disagrees")})
+                         "verdict": "agrees" if top == [top_paradigm] else
+                         ("partly: tied with " + ", ".join(p for p in top if p != top_paradigm)
+                          if top_paradigm in top else "disagrees")})
     lines = ["| claim (paper, Section 5) | paper | ours | verdict |", "|---|---|---|---|"]
     lines += [f"| {r['claim']} | {r['paper']} | {r['ours']} | {r['verdict']} |" for r in rows]
     return lines, rows
@@ -399,7 +410,8 @@ def claim_lines(summ: pd.DataFrame, view: pd.DataFrame | None = None, arm: str =
 def paper_arm_lines(summ: pd.DataFrame, results: Path) -> list[str]:
     """Both arms side by side (success, steps of successful episodes and their ratio to the exact optimum, per
     env × fail_prob), and how often the paper's HNSDT reached each kind of sub-goal its planner set."""
-    methods = [m for m in ("symbolic", *[x for pair in PAPER_ARM.items() for x in pair]) if m in set(summ.method)]
+    planners = [name for name, m in METHODS.items() if m.training == "none"]  # the symbolic baseline
+    methods = [m for m in (*planners, *[x for pair in PAPER_ARM.items() for x in pair]) if m in set(summ.method)]
     if not set(PAPER_ARM.values()) & set(methods):
         return []
     lines = ["| env | fail_prob | " + " | ".join(_label(m) for m in methods) + " |",
@@ -420,12 +432,12 @@ def paper_arm_lines(summ: pd.DataFrame, results: Path) -> list[str]:
     seg_path = results / "segments.csv"
     if seg_path.is_file():
         seg = pd.read_csv(seg_path)
-        seg = seg[seg.method == PAPER_ARM["hnsdt"]]
+        seg = seg[seg.method == PAPER_ARM[PROPOSED]]
         if not seg.empty:
             seg = seg.assign(kind=seg.operator.str.extract(r"^(\w+)", expand=False))
             t = seg.groupby(["env", "fail_prob", "kind"]).achieved.agg(["mean", "size"]).reset_index()
             kinds = sorted(set(t.kind), key=lambda k: (k != "Move", k))
-            lines += [f"Sub-goals of {_label(PAPER_ARM['hnsdt'])} reached within their step allowance (share of "
+            lines += [f"Sub-goals of {_label(PAPER_ARM[PROPOSED])} reached within their step allowance (share of "
                       "the planner's operators, all seeds; `results/segments.csv`):", "",
                       "| env | fail_prob | " + " | ".join(kinds) + " |", "|---|---|" + "---|" * len(kinds)]
             for (env, fp), g in t.groupby(["env", "fail_prob"], sort=True):
@@ -473,13 +485,15 @@ def _largest_informative_d(m: int, K: int, delta: float) -> float:
     return lo
 
 
-def theorem_sections(params: dict, results: Path, summ: pd.DataFrame, episodes: pd.DataFrame) -> tuple[list[str], dict]:
+def theorem_sections(params: dict, results: Path, summ: pd.DataFrame, episodes: pd.DataFrame) -> tuple[dict, dict]:
+    """The two theorems checked on the measurements: the template's context for their sections (empty when
+    the inputs are missing) and their rows for ``theorems.json``."""
     from hnsdt.config import env_settings, theorem_settings
     from hnsdt.evaluation.theorems import theorem1, theorem2
     from hnsdt.oracle import optimum
 
     if not (results / "segments.csv").is_file() or "regret" not in summ or "theorems" not in params:
-        return [], {}
+        return {}, {}
     ts = theorem_settings(params)
     segments = pd.read_csv(results / "segments.csv")
     envs = {e: env_settings(params, e) for e in sorted(set(segments.env))}
@@ -490,39 +504,27 @@ def theorem_sections(params: dict, results: Path, summ: pd.DataFrame, episodes: 
     t1 = theorem1(segments, episodes, v_star, ts["gamma"], ts["B"])
     t2_parts = []
     for env in sorted(set(segments.env)):
-        d = n_params.get(f"{env}/hnsdt", float("nan")) if ts["vc_dimension"] == "parameters" else ts["vc_dimension"]
+        d = n_params.get(f"{env}/{PROPOSED}", float("nan")) if ts["vc_dimension"] == "parameters" else ts["vc_dimension"]
         part = theorem2(segments[segments.env == env], episodes, counts, float(d), ts["delta"])
         part["d_max_informative"] = [_largest_informative_d(r.m, r.K, ts["delta"]) for r in part.itertuples()]
         t2_parts.append(part)
     t2 = pd.concat(t2_parts, ignore_index=True) if t2_parts else pd.DataFrame()
-    lines = ["## Theorem 1, checked (hierarchical performance bound)", "",
-             f"In the theorem's own units, from HNSDT's evaluation episodes: discounted values with γ = "
-             f"{ts['gamma']:g}, costs in reward units (a step costs 0.1), B = {ts['B']:g}. The measured side is "
-             "V*_γ − V^HNSDT_γ, with V*_γ the exact optimum (value iteration with the same γ) and V^HNSDT_γ the mean "
-             "discounted return of the episodes; ε_exec compares each operator's discounted cost with its optimal "
-             "expected discounted cost (see `hnsdt/evaluation/theorems.py`).", "",
-             "| env | fail_prob | ε_sym | ε_exec | ρ | bound | V*_γ | V^HNSDT_γ | measured regret | holds | "
-             "bound / measured |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {r.env} | {r.fail_prob:g} | {r.eps_sym:.3f} | {r.eps_exec:.4f} | {r.rho:.3f} | {r.bound:.2f} | "
-              f"{r.v_star:.4f} | {r.v_method:.4f} | {r.measured_regret:.4f} | {'yes' if r.holds else 'NO'} | "
-              f"{_fmt(r.looseness, '.0f')} |" for r in t1.itertuples()]
-    lines += ["", f"The bound holds in {int(t1.holds.sum())} of {len(t1)} cells. The 1/(1−γ)² factors make it "
-              "loose by orders of magnitude whenever ε_exec or ρ is non-zero. A slightly negative measured regret "
-              "is sampling noise: V^HNSDT_γ is a mean over finitely many episodes, V*_γ an exact expectation.", "",
-              "## Theorem 2, checked (PAC sub-goal completion)", "",
-              f"m = fewest training segments of any operator in the plan, K = plan length, δ = {ts['delta']:g}, "
-              f"d = {'the number of HNSDT parameters' if ts['vc_dimension'] == 'parameters' else ts['vc_dimension']} "
-              "(a VC-dimension proxy). Measured: the share of episodes in which every sub-goal segment succeeded.", "",
-              "| env | fail_prob | m | K | d | PAC lower bound | measured | holds | largest d with a bound > 0 |",
-              "|---|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {r.env} | {r.fail_prob:g} | {r.m} | {r.K} | {r.d:.0f} | {_fmt(r.bound)} | {r.measured:.3f} | "
-              f"{'yes' if r.holds else 'NO'} | {r.d_max_informative:.2f} |" for r in t2.itertuples()]
-    lines += ["", "A bound of −inf is vacuous: the VC argument needs at least d segments per operator, and with d the "
-              "parameter count there are far fewer, so it holds trivially and says nothing. It only becomes "
-              "informative (above 0) for VC dimensions up to the last column, far below any transformer's.", ""]
+    t1_lines = ["| env | fail_prob | ε_sym | ε_exec | ρ | bound | V*_γ | V^HNSDT_γ | measured regret | holds | "
+                "bound / measured |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    t1_lines += [f"| {r.env} | {r.fail_prob:g} | {r.eps_sym:.3f} | {r.eps_exec:.4f} | {r.rho:.3f} | {r.bound:.2f} | "
+                 f"{r.v_star:.4f} | {r.v_method:.4f} | {r.measured_regret:.4f} | {'yes' if r.holds else 'NO'} | "
+                 f"{_fmt(r.looseness, '.0f')} |" for r in t1.itertuples()]
+    t2_lines = ["| env | fail_prob | m | K | d | PAC lower bound | measured | holds | largest d with a bound > 0 |",
+                "|---|---|---|---|---|---|---|---|---|"]
+    t2_lines += [f"| {r.env} | {r.fail_prob:g} | {r.m} | {r.K} | {r.d:.0f} | {_fmt(r.bound)} | {r.measured:.3f} | "
+                 f"{'yes' if r.holds else 'NO'} | {r.d_max_informative:.2f} |" for r in t2.itertuples()]
+    context = {"gamma": f"{ts['gamma']:g}", "B": f"{ts['B']:g}", "delta": f"{ts['delta']:g}",
+               "d_name": ("the number of HNSDT parameters" if ts["vc_dimension"] == "parameters"
+                          else ts["vc_dimension"]),
+               "theorem1": t1_lines, "theorem1_holds": int(t1.holds.sum()), "theorem1_cells": len(t1),
+               "theorem2": t2_lines}
     data = {"theorem1": t1.to_dict(orient="records"), "theorem2": t2.to_dict(orient="records")}
-    return lines, data
+    return context, data
 
 
 def write_report(params: dict, results: Path, out: Path, lock_path: str | Path = "dvc.lock") -> Path:
@@ -543,7 +545,7 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
         paradigm_figure(summ, tmp / "figures" / "paradigms.png")
         view = seed_view(episodes)
         claims, claim_rows = claim_lines(summ, view)
-        paper_claims, paper_claim_rows = claim_lines(summ, view, arm="paper")
+        paper_claims_lines, paper_claim_rows = claim_lines(summ, view, arm="paper")
         arms = paper_arm_lines(summ, results)
         usage = usage_lines(results)
         has_optimum = "regret" in summ
@@ -553,68 +555,25 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
         inputs = {p: md5 for p, md5 in sorted(outs.items()) if p.startswith(("data/", "models/"))}
         envs, methods = sorted(set(summ.env)), sorted(set(summ.method))
         rev, digest = git_revision(), params_digest(params)
-        provenance = [f"- git revision: `{rev}`", f"- params digest (sha256 of params.yaml, 16 hex): `{digest}`",
-                      "- inputs (md5 from dvc.lock):"]
-        provenance += [f"  - `{p}`: `{md5}`" for p, md5 in inputs.items()] or ["  - (dvc.lock has none yet)"]
         recorded = episodes[episodes.rrd != ""]
-        text = [
-            "# hnsdt report", "",
-            f"Evaluation of {', '.join(_label(m) for m in methods)} on {', '.join(envs)}: "
-            f"{int(summ.seeds.max())} training seed(s), fail_prob {', '.join(f'{f:g}' for f in sorted(set(summ.fail_prob)))}, "
-            f"{int(episodes.groupby(['method', 'env', 'fail_prob', 'seed']).size().max())} episodes per cell. "
-            "Metrics are computed per seed, then mean ± std over seeds.", "",
-            "## Provenance (applies to every figure below)", "", *provenance, "",
-            "## The environments", "",
-            "![environments](figures/environments.png)", "",
-            "The paper's Figures 2 and 3, drawn from the layout files in `params.yaml` (`envs.<name>.layout`): the "
-            "agent starts at S and must reach the exit G holding every item; a door opens with the key of its "
-            "letter; each move fails with probability fail_prob.", "",
-            "## Comprehensive comparison", "",
-            "![comparison](figures/comparison.png)", "",
-            "Success rate, steps of successful episodes and average reward per method across failure "
-            "probabilities (the paper's comprehensive comparison). Made from `results/summary.csv`.", "",
-            "## Comparison by architectural paradigm", "",
-            "![paradigms](figures/paradigms.png)", "",
-            "Success rate and average reward of each method, averaged over the failure probabilities, grouped by "
-            f"the paper's paradigms ({', '.join(PARADIGMS)}). Made from `results/summary.csv`.", "",
-            "## Robustness heatmap", "",
-            "![heatmap](figures/success_heatmap.png)", "",
-            "Success rate for every method × (environment, failure probability) (the paper's robustness "
-            "figure). Made from `results/summary.csv`.", "",
-            *([
-                "## Distance to the exact optimum", "",
-                "![regret](figures/regret.png)", "",
-                "Regret V* − V^π in expected return per method across failure probabilities; V* from finite-horizon "
-                "value iteration over the full MDP (`hnsdt/oracle.py`). Made from `results/summary.csv`.", "",
-                _optimum_table(summ), "", *_target_lines(summ), "",
-            ] if has_optimum else []),
-            *(["## Agreement with the paper's claims", "", *claims, "",
-                "The paper's own numbers come from its text (its figures are not in the source); a point value "
-                "agrees when ours is within two of the paper's standard deviations.", ""] if len(claims) > 2 else []),
-            *(["## The paper's own configuration", "",
-                f"Our HNSDT and pure DT differ from the paper's (README, \"Two arms\"). "
-                f"{_label(PAPER_ARM['hnsdt'])} is the paper's build: one-cell Move operators planned by BFS, a DT "
-                "trained only on random exploration segmented in hindsight by those operators; "
-                f"{_label(PAPER_ARM['pure_dt'])} is its pure DT, trained on the same random exploration with no "
-                "conditioning token. Both arms against the symbolic baseline:", "", *arms, "",
-                "The paper's claims again, with the paper's HNSDT and pure DT in place of ours (every other method "
-                "unchanged):", "", *paper_claims, ""] if arms else []),
-            "## Seeds that solve each environment", "", *seed_lines(view), "",
-            f"A seed solves an environment when it succeeds in at least {SOLVED:.0%} of its evaluated episodes "
-            f"(all failure probabilities). The interval resamples the training seeds {BOOTSTRAP:,} times "
-            "(percentile bootstrap, seeded): with 5 seeds and a learner that either solves a map or never does, "
-            "the mean alone hides that, and a different machine or seed set can move it by a whole seed.", "",
-            *(["## Training data used", "", *usage, ""] if usage else []),
-            "## Numbers", "", _table(summ) if has_optimum else _table(summ.assign(
-                success_ratio=np.nan, steps_ratio=np.nan, regret=np.nan)), "",
-            "## Replaying episodes", "",
-            f"{len(recorded)} evaluated episodes have recordings; `hnsdt replay EPISODE_ID` prints their "
-            "`.rrd` (rerun) and `.mcap` (Foxglove) paths, e.g. "
-            + (f"`hnsdt replay {recorded.episode_id.iloc[0]}`." if len(recorded) else "(none recorded)."), "",
-        ]
         theorem_text, theorem_data = theorem_sections(params, results, summ, episodes)
-        text[-1:-1] = theorem_text
-        (tmp / "report.md").write_text("\n".join(text))
+        paper_pure_dt = [m for m in PAPER_ARM.values() if m != PAPER_ARM[PROPOSED]]
+        numbers = summ if has_optimum else summ.assign(success_ratio=np.nan, steps_ratio=np.nan, regret=np.nan)
+        text = render_template(
+            "report.md.j2", **({"theorem1": []} | theorem_text),
+            methods=[_label(m) for m in methods], envs=envs, seeds=int(summ.seeds.max()),
+            fail_probs=[f"{f:g}" for f in sorted(set(summ.fail_prob))],
+            episodes_per_cell=int(episodes.groupby(["method", "env", "fail_prob", "seed"]).size().max()),
+            revision=rev, digest=digest, inputs=inputs, paradigms=PARADIGMS,
+            optimum=_optimum_table(summ).split("\n") if has_optimum else [],
+            target=_target_lines(summ) if has_optimum else [],
+            claims=claims if len(claims) > 2 else [], within_std=paper_claims()["within_std"],
+            arms=arms, paper_claims=paper_claims_lines, paper_hnsdt=_label(PAPER_ARM[PROPOSED]),
+            paper_pure_dt=", ".join(_label(m) for m in paper_pure_dt),
+            seeds_table=seed_lines(view), solved=f"{SOLVED:.0%}", bootstrap=f"{BOOTSTRAP:,}", usage=usage,
+            numbers=_table(numbers).split("\n"), recorded=len(recorded),
+            example_episode=recorded.episode_id.iloc[0] if len(recorded) else "")
+        (tmp / "report.md").write_text(text)
         theorem_data = {**theorem_data, "claims": claim_rows} if claim_rows else theorem_data
         if paper_claim_rows and arms:
             theorem_data["claims_paper_arm"] = paper_claim_rows

@@ -37,6 +37,7 @@ import numpy as np
 import pandas as pd
 
 from hnsdt.envs.keydoor import GOAL_REWARD, STEP_REWARD
+from hnsdt.methods import PROPOSED
 
 
 def step_cost(steps, gamma: float) -> np.ndarray:
@@ -61,7 +62,7 @@ def optimal_operator_cost(optimal_steps, fail_prob: float, gamma: float, is_move
 
 
 def theorem1(segments: pd.DataFrame, episodes: pd.DataFrame, v_star: dict, gamma: float, bound_b: float,
-             method: str = "hnsdt") -> pd.DataFrame:
+             method: str = PROPOSED) -> pd.DataFrame:
     """One row per env × fail_prob: ε_sym, ε_exec, ρ, the bound, and the measured regret V*_γ − V^π_γ.
     ``v_star[(env, fail_prob)]`` is the optimal discounted value of the start state."""
     rows = []
@@ -96,7 +97,7 @@ def pac_bound(m: int, K: int, d: float, delta: float) -> float:
 
 
 def theorem2(segments: pd.DataFrame, episodes: pd.DataFrame, train_counts: pd.DataFrame, vc_dimension: float,
-             delta: float, method: str = "hnsdt") -> pd.DataFrame:
+             delta: float, method: str = PROPOSED) -> pd.DataFrame:
     """One row per env × fail_prob: m, K, the PAC lower bound and the measured all-sub-goals success rate."""
     rows = []
     seg = segments[segments.method == method]

@@ -1,9 +1,10 @@
 """Checkpoints of every learned model: a folder with ``model.safetensors`` (weights) and ``config.json``
-(``arch``, the model's config dataclass under ``model``, and training facts)."""
+(``arch``, the model's config dataclass under ``model``, and training facts). The architectures are the
+networks of the method registry (:mod:`hnsdt.methods`): each model class names its ``arch`` and
+``config_class``."""
 
 from __future__ import annotations
 
-import importlib
 import json
 from dataclasses import asdict
 from pathlib import Path
@@ -12,14 +13,8 @@ import torch
 from safetensors.torch import load_file, save_file
 
 from hnsdt.fileio import atomic_dir
+from hnsdt.methods import architectures, resolve
 
-# arch name -> (module, config class, model class); imported on demand
-ARCHITECTURES = {
-    "decision_transformer": ("hnsdt.models.dt", "DTConfig", "DecisionTransformer"),
-    "recurrent": ("hnsdt.models.recurrent", "RecurrentConfig", "RecurrentPolicy"),
-    "q_network": ("hnsdt.models.qnetwork", "QNetworkConfig", "QNetwork"),
-    "option_critic": ("hnsdt.models.qnetwork", "OptionCriticConfig", "OptionCritic"),
-}
 
 
 def save_checkpoint(model: torch.nn.Module, out_dir: str | Path, extra: dict | None = None) -> Path:
@@ -44,12 +39,12 @@ def load_checkpoint(path: str | Path, device: str = "cpu") -> tuple[torch.nn.Mod
     except json.JSONDecodeError as e:
         raise ValueError(f"checkpoint {path}: config.json is not valid JSON ({e})") from None
     arch = meta.get("arch", "decision_transformer")
-    if arch not in ARCHITECTURES:
-        raise ValueError(f"checkpoint {path}: unknown arch {arch!r}")
-    module, cfg_cls, model_cls = ARCHITECTURES[arch]
-    mod = importlib.import_module(module)
+    known = architectures()  # the networks of the method registry
+    if arch not in known:
+        raise ValueError(f"checkpoint {path}: unknown arch {arch!r}; known: {', '.join(sorted(known))}")
+    network = resolve(known[arch])
     try:
-        model = getattr(mod, model_cls)(getattr(mod, cfg_cls)(**meta["model"]))
+        model = network(network.config_class(**meta["model"]))
     except (KeyError, TypeError, ValueError) as e:
         raise ValueError(f"checkpoint {path}: config.json does not describe a {arch} ({e})") from None
     try:

@@ -81,7 +81,8 @@ class DTConfig:
 
 
 class DecisionTransformer(nn.Module):
-    arch = "decision_transformer"
+    arch = "decision_transformer"  # the checkpoint architecture (hnsdt.models.checkpoint)
+    config_class = DTConfig
 
     def __init__(self, cfg: DTConfig):
         super().__init__()

@@ -39,7 +39,8 @@ class QNetworkConfig:
 
 
 class QNetwork(nn.Module):
-    arch = "q_network"
+    arch = "q_network"  # the checkpoint architecture (hnsdt.models.checkpoint)
+    config_class = QNetworkConfig
 
     def __init__(self, cfg: QNetworkConfig):
         super().__init__()
@@ -66,7 +67,8 @@ class OptionCritic(nn.Module):
     """Shared features; heads for Q_Ω(s, ω), the termination probabilities β_ω(s) and the intra-option
     policies π_ω(a | s) of every option (Bacon et al., 2017)."""
 
-    arch = "option_critic"
+    arch = "option_critic"  # the checkpoint architecture (hnsdt.models.checkpoint)
+    config_class = OptionCriticConfig
 
     def __init__(self, cfg: OptionCriticConfig):
         super().__init__()

@@ -44,7 +44,8 @@ class RecurrentConfig:
 
 
 class RecurrentPolicy(nn.Module):
-    arch = "recurrent"
+    arch = "recurrent"  # the checkpoint architecture (hnsdt.models.checkpoint)
+    config_class = RecurrentConfig
 
     def __init__(self, cfg: RecurrentConfig):
         super().__init__()

@@ -94,3 +94,14 @@ def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bo
     bar.close()
     model.eval()
     return model, curve
+
+
+def train_decision_transformer(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bool = True,
+                               desc: str = "train") -> tuple[DecisionTransformer, list[dict], dict]:
+    """The registry's trainer (:mod:`hnsdt.methods`): :func:`train_dt` and the data it used."""
+    model, curve = train_dt(frames, model_cfg, cfg, progress=progress, desc=desc)
+    used = np.isin(frames.policy, list(cfg.behaviours)) if cfg.behaviours else np.ones(len(frames), bool)
+    windows = len(window_ends(frames, model_cfg.condition, cfg.behaviours))
+    usage = {"dataset_frames": int(used.sum()), "windows_seen": curve[-1]["windows_seen"],
+             "gradient_steps": curve[-1]["step"], "epochs": round(curve[-1]["windows_seen"] / windows, 3)}
+    return model, curve, usage

@@ -31,7 +31,7 @@ class DQNConfig(OnlineConfig):
 
 
 def train_dqn(layout: Layout, max_steps: int, net_cfg: QNetworkConfig, cfg: DQNConfig, progress: bool = True,
-              desc: str = "dqn") -> tuple[QNetwork, list[dict], dict]:
+              desc: str = "train") -> tuple[QNetwork, list[dict], dict]:
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     device = torch.device(cfg.device)
@@ -94,8 +94,6 @@ def train_dqn(layout: Layout, max_steps: int, net_cfg: QNetworkConfig, cfg: DQNC
 class DQNAgent(OnlineAgent):
     """Greedy in Q (or ε-greedy with ``epsilon`` > 0, from the seeded generator)."""
 
-    name = "dqn"
-
     def act(self, obs: np.ndarray) -> np.ndarray:
         with torch.no_grad():
             actions = self.model(self.states(obs)).argmax(-1).cpu().numpy()
@@ -103,3 +101,8 @@ class DQNAgent(OnlineAgent):
             explore = self.rng.random(len(obs)) < self.epsilon
             actions = np.where(explore, self.rng.integers(0, N_ACTIONS, len(obs)), actions)
         return actions
+
+
+def make_agent(model, meta: dict, layout, executor, epsilon: float = 0.0, seed: int = 0) -> DQNAgent:
+    """The registry's agent factory (:mod:`hnsdt.methods`)."""
+    return DQNAgent(model, epsilon, seed)

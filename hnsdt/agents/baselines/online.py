@@ -70,7 +70,7 @@ class ReplayBuffer:
     def sample(self, batch_size: int) -> dict[str, np.ndarray]:
         idx = self.rng.integers(0, self.n, batch_size)
         return {"obs": self.obs[idx], "actions": self.actions[idx], "rewards": self.rewards[idx],
-                "next_obs": self.next_obs[idx], "terminated": self.terminated[idx], "options": self.options[idx]}
+                "next_obs": self.next_obs[idx], "terminated": self.terminated[idx], "option": self.options[idx]}
 
 
 class EpisodeStats:

@@ -54,7 +54,7 @@ def choose_options(q: torch.Tensor, epsilon: float, rng: np.random.Generator) ->
 
 
 def train_options(layout: Layout, max_steps: int, net_cfg: OptionCriticConfig, cfg: OptionsConfig,
-                  progress: bool = True, desc: str = "options") -> tuple[OptionCritic, list[dict], dict]:
+                  progress: bool = True, desc: str = "train") -> tuple[OptionCritic, list[dict], dict]:
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     device = torch.device(cfg.device)
@@ -109,10 +109,10 @@ def train_options(layout: Layout, max_steps: int, net_cfg: OptionCriticConfig, c
             idx = torch.arange(cfg.batch_size, device=device)
             with torch.no_grad():
                 q_t = target(s["next_obs"])[0]
-                b_t = net(s["next_obs"])[1][idx, s["options"]]
+                b_t = net(s["next_obs"])[1][idx, s["option"]]
                 y = s["rewards"] + cfg.gamma * (1 - s["terminated"]) * (
-                    (1 - b_t) * q_t[idx, s["options"]] + b_t * q_t.max(-1).values)
-            critic = net(s["obs"])[0][idx, s["options"]]
+                    (1 - b_t) * q_t[idx, s["option"]] + b_t * q_t.max(-1).values)
+            critic = net(s["obs"])[0][idx, s["option"]]
             loss = loss + 0.5 * F.mse_loss(critic, y)
         opt.zero_grad(set_to_none=True)
         loss.backward()
@@ -146,8 +146,6 @@ def train_options(layout: Layout, max_steps: int, net_cfg: OptionCriticConfig, c
 class OptionsAgent(OnlineAgent):
     """Call-and-return execution of the learned options: sampled actions and terminations, greedy options."""
 
-    name = "options"
-
     def reset(self, obs: np.ndarray) -> None:
         self.option = np.zeros(len(obs), np.int64)
         self.need_option = np.ones(len(obs), bool)
@@ -162,3 +160,8 @@ class OptionsAgent(OnlineAgent):
         self.option = np.where(need, choose_options(q, self.epsilon, self.rng), self.option)
         self.need_option[:] = False
         return sample_categorical(logits[rows, torch.from_numpy(self.option)], self.rng)
+
+
+def make_agent(model, meta: dict, layout, executor, epsilon: float = 0.0, seed: int = 0) -> OptionsAgent:
+    """The registry's agent factory (:mod:`hnsdt.methods`)."""
+    return OptionsAgent(model, epsilon, seed)

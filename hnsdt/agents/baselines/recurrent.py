@@ -92,7 +92,7 @@ def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTr
                     recent = []
     model.eval()
     usage = {"dataset_frames": int(lengths.sum()), "dataset_episodes": int(len(starts)), "frames_seen": seen,
-             "gradient_steps": step}
+             "gradient_steps": step, "epochs": round(seen / int(lengths.sum()), 3)}
     return model, curve, usage
 
 
@@ -101,7 +101,6 @@ class RecurrentAgent:
 
     def __init__(self, model: RecurrentPolicy):
         self.model = model
-        self.name = "lstm_hier" if model.cfg.hierarchical else "gru"
         self.device = next(model.parameters()).device
 
     def reset(self, obs: np.ndarray) -> None:
@@ -124,3 +123,8 @@ class RecurrentAgent:
 
     def finish(self) -> None:
         pass
+
+
+def make_agent(model: RecurrentPolicy, meta: dict, layout, executor, epsilon: float = 0.0, seed: int = 0):
+    """The registry's agent factory (:mod:`hnsdt.methods`)."""
+    return RecurrentAgent(model)

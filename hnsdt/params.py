@@ -1,0 +1,184 @@
+"""The schema of ``params.yaml``: every knob's type, range, default and meaning, in one place.
+
+:func:`validate` checks a whole params file against it before any work starts: an unknown key, a wrong type or
+an out-of-range value stops with one line naming the key. :mod:`hnsdt.config` turns the validated sections into
+the library's configs. The learned baselines' own knobs (``baselines.<method>``) are the training and network
+config dataclasses their registry entries name (:mod:`hnsdt.methods`), checked by
+:func:`hnsdt.config.baseline_settings`.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from hnsdt.data.collect import POLICIES, STARTS
+from hnsdt.data.windows import LOSS_STEPS
+from hnsdt.executor import EXECUTORS
+from hnsdt.methods import BASELINES, DT_METHODS, METHODS, OFFLINE_BASELINES, ONLINE_BASELINES
+from hnsdt.symbolic.operators import OPERATOR_SETS
+from hnsdt.symbolic.planner import PLAN_MODES
+
+Probability = Annotated[float, Field(ge=0, le=1)]
+PositiveInt = Annotated[int, Field(ge=1)]
+
+
+class Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+
+class EnvParams(Section):
+    id: str = Field(description="registered gymnasium id (hnsdt.envs.ENV_IDS)")
+    layout: str = Field(description="layout: a built-in name, a layout file's path or the grid text")
+    max_steps: PositiveInt = Field(description="episode step limit (truncation)")
+
+
+class PaperPlannerParams(Section):
+    """The paper's arm (``hnsdt_paper``, Appendix B): these keys override ``planner``'s."""
+
+    mode: Literal[PLAN_MODES] = "bfs"
+    operators: Literal[OPERATOR_SETS] = "move"
+    allowance_factor: float | None = Field(None, gt=0)
+    allowance_min: int | None = Field(None, ge=1)
+
+
+class PlannerParams(Section):
+    mode: Literal[PLAN_MODES] = Field("cost", description="bfs = fewest operators (the paper); cost = fewest steps")
+    operators: Literal[OPERATOR_SETS] = Field("goto", description="goto = GoTo macro-operators; move = one-cell "
+                                              "Move operators (the paper)")
+    allowance_factor: float = Field(3.0, gt=0, description="an operator may take this x its nominal cost before "
+                                    "a replan ...")
+    allowance_min: PositiveInt = Field(6, description="... and at least this many steps")
+    paper: PaperPlannerParams = PaperPlannerParams()
+
+
+class BehaviourParams(Section):
+    policy: Literal[POLICIES]
+    episodes: int = Field(ge=0)
+    start: Literal[STARTS] = "layout"
+    epsilon: Probability = Field(0.0, description="noisy_planner: share of random actions")
+
+
+class CollectParams(Section):
+    seed: int = 0
+    fps: PositiveInt = Field(10, description="LeRobot timestamps: frame t is at t / fps seconds")
+    license: str = Field("apache-2.0", description="the dataset card's licence (a Hub licence identifier)")
+    render: int = Field(0, ge=0, le=64, description="> 0: store each frame as video `observation.image`, this "
+                        "many pixels per cell")
+    fail_probs: list[Probability] = Field(min_length=1, description="each behaviour's episodes are split evenly")
+    behaviours: list[BehaviourParams]
+
+
+class ModelParams(Section):
+    """A decision transformer's size (paper, Appendix C)."""
+
+    n_layers: PositiveInt
+    n_heads: PositiveInt
+    d_model: PositiveInt
+    context: PositiveInt = Field(description="timesteps in the model's window")
+    tokens: str = Field("step", description="step = one token per step; interleaved = one per state/action/"
+                        "return (hnsdt.models.dt checks it)")
+
+
+class TrainParams(Section):
+    envs: list[str] = Field(min_length=1, description="keys of `envs`; every learned method trains on each")
+    methods: list[Literal[DT_METHODS]] = Field(min_length=1, description="the decision transformers to train")
+    seeds: list[int] = Field(min_length=1, description="shared by every learned method and the evaluation")
+    behaviours: dict[Literal[DT_METHODS], list[Literal[POLICIES]]] = Field(
+        default_factory=dict, description="which collected episodes each DT learns from (absent: all)")
+    loss: dict[Literal[DT_METHODS], Literal[LOSS_STEPS]] = Field(
+        default_factory=dict, description="the window steps the loss counts (absent: window)")
+    epochs: PositiveInt = Field(description="passes over each method's training windows")
+    max_steps: int = Field(0, ge=0, description="cap on gradient steps (0 = none)")
+    batch_size: PositiveInt = 128
+    lr: float = Field(1e-3, gt=0)
+    dropout: Probability = 0.1
+    device: str = Field("auto", description="auto = cuda if available, else cpu")
+
+
+class BaselinesParams(BaseModel):
+    """``offline`` / ``online``: which baselines train; ``<method>``: that method's knobs (its config
+    dataclasses, checked by :func:`hnsdt.config.baseline_settings`)."""
+
+    model_config = ConfigDict(extra="allow", strict=True, frozen=True)
+
+    offline: list[Literal[OFFLINE_BASELINES]] = Field(default_factory=list)
+    online: list[Literal[ONLINE_BASELINES]] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _method_sections(self):
+        for key, value in (self.model_extra or {}).items():
+            if key not in BASELINES:
+                raise ValueError(f"unknown key {key!r}: not a baseline of the registry ({', '.join(BASELINES)})")
+            if not isinstance(value, dict):
+                raise ValueError(f"{key} must be a mapping of that method's knobs")
+        return self
+
+
+class EvaluateParams(Section):
+    methods: list[Literal[tuple(METHODS)]] = Field(min_length=1)
+    fail_probs: list[Probability] = Field(min_length=1)
+    episodes: PositiveInt = Field(description="per method x env x fail_prob x seed, run as one batch")
+    device: str = "cpu"
+
+
+class LogsParams(Section):
+    episodes_per_cell: int = Field(1, ge=0, description="rerun + MCAP recordings per method x env x fail_prob "
+                                   "(first seed)")
+
+
+class ComputeParams(Section):
+    executor: Literal[EXECUTORS] = Field("local", description="local = worker processes; ray = a Ray cluster")
+    workers: int = Field(0, ge=0, description="local: runs at once (0 = one per core)")
+    threads: PositiveInt = Field(1, description="torch CPU threads of each run; part of the bytes")
+
+
+class TheoremsParams(Section):
+    gamma: float = Field(gt=0, lt=1, description="discount in Theorem 1's bound")
+    B: float = Field(ge=0, description="extra cost of one failed operator step")
+    delta: float = Field(gt=0, lt=1, description="Theorem 2's confidence")
+    vc_dimension: float | str = Field("parameters", description="Theorem 2's VC-dimension proxy: a number, or "
+                                      "`parameters` (HNSDT's count)")
+
+    @field_validator("vc_dimension")
+    @classmethod
+    def _vc(cls, value):
+        if value != "parameters" and (isinstance(value, str) or value <= 0):
+            raise ValueError(f"must be a positive number or 'parameters', got {value!r}")
+        return value
+
+
+class Params(Section):
+    """The whole file. A section without defaults may be left out of a file that only some commands read
+    (``hnsdt plan`` needs ``envs`` alone); the command that needs it stops with "missing key <section>"."""
+
+    envs: dict[str, EnvParams] = Field(min_length=1)
+    planner: PlannerParams = PlannerParams()
+    collect: CollectParams | None = None
+    models: dict[str, ModelParams] = Field(default_factory=dict)
+    train: TrainParams | None = None
+    baselines: BaselinesParams = BaselinesParams()
+    evaluate: EvaluateParams | None = None
+    logs: LogsParams = LogsParams()
+    compute: ComputeParams = ComputeParams()
+    theorems: TheoremsParams | None = None
+
+
+SECTIONS = tuple(Params.model_fields)
+
+
+def validate(raw: Any, source: str = "params") -> Params:
+    """The typed params, or a ``ValueError`` of one line naming ``source`` and the first offending key."""
+    try:
+        return Params.model_validate(raw)
+    except ValidationError as e:
+        err = e.errors()[0]
+        key = ".".join(str(part) for part in err["loc"])
+        if err["type"] == "extra_forbidden":
+            raise ValueError(f"{source}: unknown key {key}") from None
+        if err["type"] == "missing":
+            raise ValueError(f"{source}: missing key {key}") from None
+        message = err["msg"].removeprefix("Value error, ")
+        got = "" if err["type"] == "value_error" else f", got {err['input']!r}"  # (its message says it)
+        raise ValueError(f"{source}: {key}: {message}{got}") from None
