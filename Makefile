@@ -7,7 +7,7 @@ VENV := .venv
 BIN := $(CURDIR)/$(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install pipeline test bench lock clean-venv
+.PHONY: install pipeline test test-fast bench lock clean-venv
 
 install: $(STAMP)
 
@@ -23,8 +23,13 @@ $(STAMP): requirements.lock pyproject.toml
 pipeline: $(STAMP)
 	PATH="$(BIN):$$PATH" dvc repro
 
+# Every tier: unit tests and smoke runs, learning thresholds (-m learning), the real pipeline end to end (-m slow).
 test: $(STAMP)
 	PATH="$(BIN):$$PATH" python -m pytest
+
+# Tier 1 only: unit tests and tiny-budget smoke runs of every method (about a minute), for the edit-test loop.
+test-fast: $(STAMP)
+	PATH="$(BIN):$$PATH" python -m pytest -m "not slow and not learning"
 
 bench: $(STAMP)
 	PATH="$(BIN):$$PATH" python benchmarks/env_throughput.py

@@ -79,6 +79,7 @@ def test_recurrent_agent_step_by_step_equals_the_training_forward(keydoor):
         agent.observe(frames.states[t : t + 1], np.array([True]), frames.actions[t : t + 1])
 
 
+@pytest.mark.learning
 @pytest.mark.parametrize("method", ["lstm_hier", "gru"])
 def test_recurrent_baselines_learn_case1(keydoor, params, random_success, method):
     settings = baseline_settings(params, method, "keydoor", 0)
@@ -90,6 +91,7 @@ def test_recurrent_baselines_learn_case1(keydoor, params, random_success, method
     assert success >= 0.9 > random_success + 0.5
 
 
+@pytest.mark.learning
 def test_dqn_learns_case1(keydoor, params, random_success):
     """The default Case 1 configuration (params.yaml), evaluated at fail_prob 0."""
     settings = baseline_settings(params, "dqn", "keydoor", 0)
@@ -99,6 +101,7 @@ def test_dqn_learns_case1(keydoor, params, random_success):
     assert _success(keydoor, DQNAgent(model)) >= 0.9 > random_success + 0.5
 
 
+@pytest.mark.learning
 def test_options_learns_to_cross_a_room(params):
     """Option-critic's learning signal, robust to which seed or CPU runs it: on an open 5x5 room with a 20-step
     horizon (uniform random actions reach the far corner in about 4% of episodes), every one of three seeds

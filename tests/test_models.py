@@ -132,6 +132,7 @@ def test_acting_runs_each_distinct_window_once_with_the_same_actions(condition):
     assert calls == [3]  # one forward over the 3 distinct windows
 
 
+@pytest.mark.learning
 def test_hnsdt_overfits_a_tiny_dataset_and_then_acts_optimally(keydoor):
     frames = _expert_frames(keydoor, n=48, fail_prob=0.1)
     cfg = DTConfig("subgoal", keydoor.n_flags, *keydoor.shape, context=6, n_layers=2, d_model=64, dropout=0.0,

@@ -94,6 +94,7 @@ def test_the_last_step_loss_counts_each_frame_once():
         make_windows(frames, ends, 4, "subgoal", loss="first")
 
 
+@pytest.mark.learning
 def test_a_dt_trained_on_random_exploration_reaches_move_subgoals_from_unseen_starts(keydoor):
     """The paper's claim for its HNSDT, at the sub-goal level: trained only on random walks labelled in
     hindsight, the DT reaches the cell a Move operator names, starting from cells no training episode started

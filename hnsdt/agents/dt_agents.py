@@ -74,7 +74,7 @@ class HNSDTAgent(HierarchicalAgent):
 
     def reset(self, obs: np.ndarray) -> None:
         super().reset(obs)
-        self.history = History(obs, self.model.cfg.context)
+        self.history = History(self.model.model_states(self.layout, obs), self.model.cfg.context)
         self._live = np.ones(len(obs), dtype=bool)
 
     def low_level(self, obs: np.ndarray, subgoal_ids: np.ndarray, targets: np.ndarray) -> np.ndarray:
@@ -89,7 +89,7 @@ class HNSDTAgent(HierarchicalAgent):
         rows = np.flatnonzero(active)
         if actions is not None:
             self.history.record_action(rows, np.asarray(actions))
-        self.history.push(rows, obs)
+        self.history.push(rows, self.model.model_states(self.layout, obs))
         self._live = np.asarray(active, bool).copy()
         super().observe(obs, active)
 
@@ -98,13 +98,13 @@ class PureDTAgent:
     """The pure decision transformer baselines, no planner, no sub-goals: conditioned on return-to-go (ours,
     ``target_return`` given) or on nothing (the paper's, ``target_return=None``)."""
 
-    def __init__(self, model: DecisionTransformer, target_return: float | None):
-        self.model = model
+    def __init__(self, model: DecisionTransformer, target_return: float | None, layout: Layout | None = None):
+        self.model, self.layout = model, layout  # (a view model reads the layout around the agent)
         self.target_return = float(target_return) if target_return is not None else None
 
     def reset(self, obs: np.ndarray) -> None:
         h = self.model.cfg.context
-        self.history = History(obs, h)
+        self.history = History(self.model.model_states(self.layout, obs), h)
         self.returns = np.zeros((len(obs), h), dtype=np.float32)
         self.returns[:, -1] = self.target_return or 0.0
         self._live = np.ones(len(obs), dtype=bool)
@@ -126,7 +126,7 @@ class PureDTAgent:
         last = self.returns[rows, -1] - (np.asarray(rewards)[rows] if rewards is not None else 0.0)
         self.returns[rows] = np.roll(self.returns[rows], -1, axis=1)
         self.returns[rows, -1] = last
-        self.history.push(rows, obs)
+        self.history.push(rows, self.model.model_states(self.layout, obs))
         self._live = np.asarray(active, bool).copy()
 
     def finish(self) -> None:
@@ -140,4 +140,4 @@ def make_agent(model: DecisionTransformer, meta: dict, layout: Layout, executor:
     condition = model.cfg.condition
     if condition == "subgoal":
         return HNSDTAgent(layout, model, executor)
-    return PureDTAgent(model, meta["target_return"] if condition == "return" else None)
+    return PureDTAgent(model, meta["target_return"] if condition == "return" else None, layout)

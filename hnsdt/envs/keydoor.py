@@ -20,7 +20,10 @@ Actions (Discrete(5), :class:`hnsdt.envs.dynamics.Actions`):
 
 Observation (MultiDiscrete, int64):
     The paper's state tuple, flat: ``row, col``, then one 0/1 flag per key held (keys in letter order), per
-    door open (doors in letter order) and per item collected (items in digit order).
+    door open (doors in letter order) and per item collected (items in digit order). With ``view_radius=r``
+    a ``Dict`` of that ``state`` and ``view``: the (2r+1) x (2r+1) cell codes around the agent
+    (:mod:`hnsdt.envs.observation`: walls, floor, exit, keys / doors / items by identity, doors open or
+    closed), which shows the world, so a learner can act on layouts it has not seen.
 
 Rewards:
     −0.1 every step, plus +1 on the step that reaches the goal holding every item.
@@ -31,7 +34,8 @@ Termination:
 Registered ids:
     ``hnsdt/KeyDoor-v0`` (default layout ``keydoor_5x5``, ``max_steps=100``). Keyword arguments: ``layout``
     (a built-in name, a layout file's path or the ASCII text itself), ``fail_prob``, ``max_steps``,
-    ``render_mode`` (``"ansi"`` or ``"rgb_array"``). ``reset(options={"state": obs})`` starts from any state.
+    ``render_mode`` (``"ansi"`` or ``"rgb_array"``), ``view_radius`` (``None``: the state only).
+    ``reset(options={"state": state})`` starts from any state.
 """
 
 from __future__ import annotations
@@ -71,6 +75,7 @@ class KeyDoorEnv(gym.Env):
         fail_prob: float = 0.0,
         max_steps: int = 100,
         render_mode: str | None = None,
+        view_radius: int | None = None,
     ):
         check_env_params(fail_prob, max_steps)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -79,7 +84,17 @@ class KeyDoorEnv(gym.Env):
         self.fail_prob = float(fail_prob)
         self.max_steps = int(max_steps)
         self.render_mode = render_mode
+        self.view_radius = view_radius
         self.observation_space = observation_space_for(self.layout)
+        if view_radius is not None:
+            from hnsdt.envs.observation import N_CODES
+
+            if int(view_radius) < 1:
+                raise ValueError(f"view_radius must be >= 1 (or None), got {view_radius}")
+            side = 2 * int(view_radius) + 1
+            self.observation_space = gym.spaces.Dict({
+                "state": self.observation_space,
+                "view": gym.spaces.Box(0, N_CODES - 1, (side, side), dtype=np.int64)})
         self.action_space = gym.spaces.Discrete(N_ACTIONS)
         self.rules = Rules(self.layout)
         self._state = self.rules.initial_states(1)[0]
@@ -94,13 +109,13 @@ class KeyDoorEnv(gym.Env):
         self._state = self.rules.initial_states(1)[0]
         if options and options.get("state") is not None:
             state = np.asarray(options["state"], dtype=np.int64)
-            if state.shape != self._state.shape or not self.observation_space.contains(state):
+            if state.shape != self._state.shape or not observation_space_for(self.layout).contains(state):
                 raise ValueError(f"reset state {state.tolist()} is not a valid observation of this layout")
             if self.layout.walls[state[0], state[1]]:
                 raise ValueError(f"reset state puts the agent in a wall at {tuple(state[:2])}")
             self._state = state.copy()
         self._steps = 0
-        return self._state.copy(), {"success": False}
+        return self._observation(), {"success": False}
 
     def step(self, action):
         action = int(action)
@@ -111,11 +126,17 @@ class KeyDoorEnv(gym.Env):
         success, move_failed = self.rules.step(self._state[None], np.array([action]), u, self.fail_prob,
                                                np.ones(1, bool))
         success, move_failed = bool(success[0]), bool(move_failed[0])
-        s = self._state
         self._steps += 1
         reward = STEP_REWARD + (GOAL_REWARD if success else 0.0)
         truncated = not success and self._steps >= self.max_steps
-        return s.copy(), reward, success, truncated, {"success": success, "move_failed": move_failed}
+        return self._observation(), reward, success, truncated, {"success": success, "move_failed": move_failed}
+
+    def _observation(self):
+        if self.view_radius is None:
+            return self._state.copy()
+        from hnsdt.envs.observation import local_view
+
+        return {"state": self._state.copy(), "view": local_view(self.layout, self._state, self.view_radius)[0]}
 
     def render(self):
         if self.render_mode == "ansi":

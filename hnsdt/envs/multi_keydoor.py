@@ -32,5 +32,7 @@ from hnsdt.envs.keydoor import KeyDoorEnv
 class MultiKeyDoorEnv(KeyDoorEnv):
     default_layout = "multikeydoor_9x9"
 
-    def __init__(self, layout=None, fail_prob: float = 0.0, max_steps: int = 250, render_mode=None):
-        super().__init__(layout=layout, fail_prob=fail_prob, max_steps=max_steps, render_mode=render_mode)
+    def __init__(self, layout=None, fail_prob: float = 0.0, max_steps: int = 250, render_mode=None,
+                 view_radius=None):
+        super().__init__(layout=layout, fail_prob=fail_prob, max_steps=max_steps, render_mode=render_mode,
+                         view_radius=view_radius)

@@ -32,6 +32,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
+from hnsdt.models.network import Network
 from hnsdt.symbolic.subgoals import VOCAB_SIZE
 
 N_ACTIONS = 5
@@ -80,13 +81,9 @@ class DTConfig:
         return asdict(self)
 
 
-class DecisionTransformer(nn.Module):
-    arch = "decision_transformer"  # the checkpoint architecture (hnsdt.models.checkpoint)
-    config_class = DTConfig
-
+class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig):
     def __init__(self, cfg: DTConfig):
-        super().__init__()
-        self.cfg = cfg
+        super().__init__(cfg)
         d = cfg.d_model
         self.row_emb = nn.Embedding(cfg.grid_h, d)
         self.col_emb = nn.Embedding(cfg.grid_w, d)
@@ -109,6 +106,10 @@ class DecisionTransformer(nn.Module):
         self.drop = nn.Dropout(cfg.dropout)
         self.register_buffer("causal_mask", nn.Transformer.generate_square_subsequent_mask(cfg.seq_len),
                              persistent=False)
+
+    def model_states(self, layout, obs):
+        """The state vectors this model reads, from the environment's observations (here: as they are)."""
+        return obs
 
     def embed_states(self, states: torch.Tensor) -> torch.Tensor:
         flags = states[..., 2:].float() if self.cfg.n_flags else states[..., :1].float() * 0

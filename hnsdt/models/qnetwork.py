@@ -13,6 +13,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from hnsdt.models.dt import N_ACTIONS
+from hnsdt.models.network import Network
 
 
 def encode_states(states: torch.Tensor, grid_h: int, grid_w: int) -> torch.Tensor:
@@ -38,13 +39,9 @@ class QNetworkConfig:
     n_layers: int = 2
 
 
-class QNetwork(nn.Module):
-    arch = "q_network"  # the checkpoint architecture (hnsdt.models.checkpoint)
-    config_class = QNetworkConfig
-
+class QNetwork(Network, arch="q_network", config=QNetworkConfig):
     def __init__(self, cfg: QNetworkConfig):
-        super().__init__()
-        self.cfg = cfg
+        super().__init__(cfg)
         self.body = mlp(cfg.grid_h + cfg.grid_w + cfg.n_flags, cfg.hidden, cfg.n_layers)
         self.head = nn.Linear(cfg.hidden, N_ACTIONS)
 
@@ -63,16 +60,12 @@ class OptionCriticConfig:
     n_layers: int = 2
 
 
-class OptionCritic(nn.Module):
+class OptionCritic(Network, arch="option_critic", config=OptionCriticConfig):
     """Shared features; heads for Q_Ω(s, ω), the termination probabilities β_ω(s) and the intra-option
     policies π_ω(a | s) of every option (Bacon et al., 2017)."""
 
-    arch = "option_critic"  # the checkpoint architecture (hnsdt.models.checkpoint)
-    config_class = OptionCriticConfig
-
     def __init__(self, cfg: OptionCriticConfig):
-        super().__init__()
-        self.cfg = cfg
+        super().__init__(cfg)
         self.body = mlp(cfg.grid_h + cfg.grid_w + cfg.n_flags, cfg.hidden, cfg.n_layers)
         self.q_head = nn.Linear(cfg.hidden, cfg.n_options)
         self.termination_head = nn.Linear(cfg.hidden, cfg.n_options)

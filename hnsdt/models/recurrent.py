@@ -18,6 +18,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from hnsdt.models.dt import N_ACTIONS
+from hnsdt.models.network import Network
 from hnsdt.symbolic.subgoals import VOCAB_SIZE
 
 CELLS = ("lstm", "gru")
@@ -43,13 +44,9 @@ class RecurrentConfig:
             raise ValueError("n_layers, hidden and embed must be positive")
 
 
-class RecurrentPolicy(nn.Module):
-    arch = "recurrent"  # the checkpoint architecture (hnsdt.models.checkpoint)
-    config_class = RecurrentConfig
-
+class RecurrentPolicy(Network, arch="recurrent", config=RecurrentConfig):
     def __init__(self, cfg: RecurrentConfig):
-        super().__init__()
-        self.cfg = cfg
+        super().__init__(cfg)
         d, h = cfg.embed, cfg.hidden
         self.row_emb = nn.Embedding(cfg.grid_h, d)
         self.col_emb = nn.Embedding(cfg.grid_w, d)

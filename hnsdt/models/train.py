@@ -45,15 +45,17 @@ def _to_tensors(batch: dict, device: torch.device) -> dict:
 
 
 def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bool = True,
-             desc: str = "train", on_epoch=None) -> tuple[DecisionTransformer, list[dict]]:
+             desc: str = "train", on_epoch=None, network: type = DecisionTransformer
+             ) -> tuple[DecisionTransformer, list[dict]]:
     """Train from scratch; returns the model (in eval mode) and the curve (mean loss every ``log_every``).
     ``on_epoch(epoch, step, model)``, if given, is called after each complete epoch and must not change the model
     or draw random numbers (budget studies copy it: the model after e epochs of a longer run is the model of
-    an e-epoch run, as nothing here depends on the total)."""
+    an e-epoch run, as nothing here depends on the total). ``network``: the model class (a
+    :class:`DecisionTransformer` or a subclass of it, e.g. :class:`hnsdt.models.view_dt.ViewDecisionTransformer`)."""
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     device = pick_device(cfg.device)
-    model = DecisionTransformer(model_cfg).to(device)
+    model = network(model_cfg).to(device)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     ends = window_ends(frames, model_cfg.condition, cfg.behaviours)
     if len(ends) == 0:

@@ -7,7 +7,6 @@ Acting after training is greedy (``eval_epsilon`` adds ε-greedy noise if set).
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -16,7 +15,7 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from hnsdt.agents.baselines.online import (
-    EpisodeStats, OnlineAgent, OnlineConfig, ReplayBuffer, linear_schedule, training_env,
+    OnlineAgent, OnlineConfig, linear_schedule, start_run,
 )
 from hnsdt.envs.keydoor import N_ACTIONS
 from hnsdt.envs.layout import Layout
@@ -32,17 +31,10 @@ class DQNConfig(OnlineConfig):
 
 def train_dqn(layout: Layout, max_steps: int, net_cfg: QNetworkConfig, cfg: DQNConfig, progress: bool = True,
               desc: str = "train") -> tuple[QNetwork, list[dict], dict]:
-    torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
-    device = torch.device(cfg.device)
-    env = training_env(layout, max_steps, cfg.num_envs, cfg.fail_probs)
-    q = QNetwork(net_cfg).to(device)
-    target = copy.deepcopy(q)
-    opt = torch.optim.Adam(q.parameters(), lr=cfg.lr)
-    obs, _ = env.reset(seed=cfg.seed)
-    buffer = ReplayBuffer(cfg.buffer_size, obs.shape[1], rng)
-    stats = EpisodeStats(cfg.num_envs)
-    steps, grad_steps, due, next_log, losses, curve = 0, 0, 0.0, cfg.log_every, [], []
+    run = start_run(layout, max_steps, QNetwork, net_cfg, cfg)
+    rng, device, env, q, target = run.rng, run.device, run.env, run.net, run.target
+    obs, buffer, stats = run.obs, run.buffer, run.stats
+    steps, due, next_log, curve = 0, 0.0, cfg.log_every, []
     explore_steps = int(cfg.exploration_fraction * cfg.env_steps)
     bar = tqdm(total=cfg.env_steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
     while steps < cfg.env_steps:
@@ -70,25 +62,14 @@ def train_dqn(layout: Layout, max_steps: int, net_cfg: QNetworkConfig, cfg: DQNC
                     td_target = b["rewards"] + cfg.gamma * target(b["next_obs"]).max(-1).values * (
                         1 - b["terminated"])
                 value = q(b["obs"]).gather(1, b["actions"][:, None]).squeeze(1)
-                loss = F.mse_loss(value, td_target)
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                opt.step()
-                grad_steps += 1
-                losses.append(loss.item())
-                if grad_steps % cfg.target_period == 0:
-                    target.load_state_dict(q.state_dict())
+                run.learn(F.mse_loss(value, td_target), cfg.target_period)
         # 4. one curve row per `log_every` env steps
         if steps >= next_log or steps >= cfg.env_steps:
             next_log += cfg.log_every
-            row = {"step": steps, "epsilon": round(epsilon, 4), **stats.row(),
-                   "loss": float(np.mean(losses)) if losses else float("nan")}
-            losses = []
-            curve.append(row)
-            bar.set_postfix(success=f"{row['success']:.2f}", eps=f"{epsilon:.2f}")
+            curve.append(run.curve_row(steps, epsilon))
+            bar.set_postfix(success=f"{curve[-1]['success']:.2f}", eps=f"{epsilon:.2f}")
     bar.close()
-    q.eval()
-    return q, curve, {"env_steps": steps, "episodes": stats.episodes, "gradient_steps": grad_steps}
+    return run.result(steps, curve)
 
 
 class DQNAgent(OnlineAgent):

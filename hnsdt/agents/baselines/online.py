@@ -3,7 +3,8 @@ per-episode statistics of the training curve."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import copy
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -99,6 +100,61 @@ class EpisodeStats:
         r, n, s = zip(*f)
         return {"episodes": self.episodes, "return": float(np.mean(r)), "success": float(np.mean(s)),
                 "length": float(np.mean(n))}
+
+
+@dataclass
+class OnlineRun:
+    """What every online learner starts from, built in one order so that a seed gives the same run."""
+
+    rng: np.random.Generator  # actions, exploration and replay sampling
+    device: torch.device
+    env: KeyDoorVectorEnv
+    net: torch.nn.Module
+    target: torch.nn.Module  # a copy of ``net``, refreshed every ``target_period`` gradient steps
+    opt: torch.optim.Optimizer
+    obs: np.ndarray
+    buffer: ReplayBuffer
+    stats: EpisodeStats
+    grad_steps: int = 0
+    losses: list[float] = field(default_factory=list)  # since the last curve row
+
+    def learn(self, loss: torch.Tensor, target_period: int) -> None:
+        """One Adam step on ``loss``; the target network copies the online one every ``target_period`` steps."""
+        self.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        self.opt.step()
+        self.grad_steps += 1
+        self.losses.append(loss.item())
+        if self.grad_steps % target_period == 0:
+            self.target.load_state_dict(self.net.state_dict())
+
+    def curve_row(self, steps: int, epsilon: float, **extra) -> dict:
+        """A training-curve row: env steps, ε, the episodes finished and the mean loss since the last row."""
+        row = {"step": steps, "epsilon": round(epsilon, 4), **self.stats.row(),
+               "loss": float(np.mean(self.losses)) if self.losses else float("nan"), **extra}
+        self.losses = []
+        return row
+
+    def result(self, steps: int, curve: list[dict]) -> tuple[torch.nn.Module, list[dict], dict]:
+        """The trainer's return: the network (eval mode), its curve and the data it used."""
+        self.net.eval()
+        return self.net, curve, {"env_steps": steps, "episodes": self.stats.episodes,
+                                 "gradient_steps": self.grad_steps}
+
+
+def start_run(layout: Layout, max_steps: int, network: type, net_cfg, cfg: OnlineConfig) -> OnlineRun:
+    """Seed torch and numpy, build the training copies, the network (``network(net_cfg)``), its target
+    copy, Adam, the first observations, the replay buffer and the episode statistics."""
+    torch.manual_seed(cfg.seed)
+    rng = np.random.default_rng(cfg.seed)
+    device = torch.device(cfg.device)
+    env = training_env(layout, max_steps, cfg.num_envs, cfg.fail_probs)
+    net = network(net_cfg).to(device)
+    target = copy.deepcopy(net)
+    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
+    obs, _ = env.reset(seed=cfg.seed)
+    return OnlineRun(rng, device, env, net, target, opt, obs, ReplayBuffer(cfg.buffer_size, obs.shape[1], rng),
+                     EpisodeStats(cfg.num_envs))
 
 
 class OnlineAgent:

@@ -17,7 +17,6 @@ Acting after training samples actions from π_ω and terminations from β_ω (se
 
 from __future__ import annotations
 
-import copy
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,7 +25,7 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from hnsdt.agents.baselines.online import (
-    EpisodeStats, OnlineAgent, OnlineConfig, ReplayBuffer, linear_schedule, training_env,
+    OnlineAgent, OnlineConfig, linear_schedule, start_run,
 )
 from hnsdt.envs.layout import Layout
 from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig
@@ -55,20 +54,13 @@ def choose_options(q: torch.Tensor, epsilon: float, rng: np.random.Generator) ->
 
 def train_options(layout: Layout, max_steps: int, net_cfg: OptionCriticConfig, cfg: OptionsConfig,
                   progress: bool = True, desc: str = "train") -> tuple[OptionCritic, list[dict], dict]:
-    torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
-    device = torch.device(cfg.device)
-    env = training_env(layout, max_steps, cfg.num_envs, cfg.fail_probs)
-    net = OptionCritic(net_cfg).to(device)
-    target = copy.deepcopy(net)
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
-    obs, _ = env.reset(seed=cfg.seed)
-    buffer = ReplayBuffer(cfg.buffer_size, obs.shape[1], rng)
-    stats = EpisodeStats(cfg.num_envs)
+    run = start_run(layout, max_steps, OptionCritic, net_cfg, cfg)
+    rng, device, env, net, target = run.rng, run.device, run.env, run.net, run.target
+    obs, buffer, stats = run.obs, run.buffer, run.stats
     rows = torch.arange(cfg.num_envs, device=device)
     option = np.zeros(cfg.num_envs, np.int64)
     need_option = np.ones(cfg.num_envs, bool)
-    steps, grad_steps, next_log, losses, curve, lengths, option_steps = 0, 0, cfg.log_every, [], [], [], 0
+    steps, next_log, curve, lengths, option_steps = 0, cfg.log_every, [], [], 0
     explore_steps = int(cfg.exploration_fraction * cfg.env_steps)
     bar = tqdm(total=cfg.env_steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
     while steps < cfg.env_steps:
@@ -114,13 +106,7 @@ def train_options(layout: Layout, max_steps: int, net_cfg: OptionCriticConfig, c
                     (1 - b_t) * q_t[idx, s["option"]] + b_t * q_t.max(-1).values)
             critic = net(s["obs"])[0][idx, s["option"]]
             loss = loss + 0.5 * F.mse_loss(critic, y)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        grad_steps += 1
-        losses.append(loss.item())
-        if grad_steps % cfg.target_period == 0:
-            target.load_state_dict(net.state_dict())
+        run.learn(loss, cfg.target_period)
 
         # 4. options end by their termination draw or with the episode
         ended = rng.random(cfg.num_envs) < beta_next[rows, opt_t].detach().cpu().numpy()
@@ -132,15 +118,11 @@ def train_options(layout: Layout, max_steps: int, net_cfg: OptionCriticConfig, c
         bar.update(cfg.num_envs)
         if steps >= next_log or steps >= cfg.env_steps:
             next_log += cfg.log_every
-            switches = sum(lengths)
-            row = {"step": steps, "epsilon": round(epsilon, 4), **stats.row(),
-                   "loss": float(np.mean(losses)), "option_length": option_steps / max(switches, 1)}
-            losses, lengths, option_steps = [], [], 0
-            curve.append(row)
-            bar.set_postfix(success=f"{row['success']:.2f}", eps=f"{epsilon:.2f}")
+            curve.append(run.curve_row(steps, epsilon, option_length=option_steps / max(sum(lengths), 1)))
+            lengths, option_steps = [], 0
+            bar.set_postfix(success=f"{curve[-1]['success']:.2f}", eps=f"{epsilon:.2f}")
     bar.close()
-    net.eval()
-    return net, curve, {"env_steps": steps, "episodes": stats.episodes, "gradient_steps": grad_steps}
+    return run.result(steps, curve)
 
 
 class OptionsAgent(OnlineAgent):

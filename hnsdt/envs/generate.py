@@ -1,0 +1,126 @@
+"""Procedurally generated key–door worlds: seeded families of layouts, for training and held-out evaluation.
+
+Families (sizes drawn per seed inside the family's ranges; every placement uniform over the free cells that
+keep the family's structure):
+
+* ``keydoor`` — Case 1's structure: a wall splits the grid into two rooms, one locked door ``A`` in it; the
+  start and the key ``a`` lie in the first room, the exit ``G`` in the second. The wall runs vertically or,
+  for half the seeds, horizontally.
+* ``multikeydoor`` — Case 2's structure: two parallel walls make three rooms in a chain, doors ``A`` and ``B``
+  in them; the start and key ``a`` in the first room, key ``b`` and item ``1`` behind door ``A``, item ``2``
+  and the exit behind door ``B`` (the keys of later doors sit behind earlier doors).
+
+The same ``(family, seed, sizes)`` always gives the same layout (:func:`generate`). Every generated layout goes
+through :func:`hnsdt.envs.layout.parse_layout` (the same validation and solvability check as a layout file),
+and :func:`check_usable` asks more before one is used: the planner finds a plan and the exact optimum succeeds
+within the step limit. :func:`write_layout` writes any layout as a layout file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hnsdt.envs.layout import Layout, LayoutError, parse_layout
+
+FAMILIES = ("keydoor", "multikeydoor")
+
+
+@dataclass(frozen=True)
+class FamilySizes:
+    """Grid size ranges of a family (inclusive), rows x columns before the optional transpose."""
+
+    rows: tuple[int, int]
+    cols: tuple[int, int]
+
+
+DEFAULT_SIZES = {"keydoor": FamilySizes(rows=(5, 7), cols=(5, 8)),
+                 "multikeydoor": FamilySizes(rows=(6, 9), cols=(9, 12))}
+_MIN = {"keydoor": (3, 5), "multikeydoor": (4, 8)}  # the smallest grid that can hold the family's structure
+
+
+def check_sizes(family: str, sizes: FamilySizes) -> None:
+    """One clear line when a family's size ranges cannot yield a layout."""
+    if family not in FAMILIES:
+        raise LayoutError(f"unknown layout family {family!r}; expected one of {', '.join(FAMILIES)}")
+    min_rows, min_cols = _MIN[family]
+    for name, (lo, hi), least in (("rows", sizes.rows, min_rows), ("cols", sizes.cols, min_cols)):
+        if lo > hi:
+            raise LayoutError(f"family {family}: {name} range {lo}..{hi} is empty")
+        if lo < least:
+            raise LayoutError(f"family {family}: {name} must be at least {least} to hold a {family} world "
+                              f"(walls, doors, rooms); got {lo}..{hi}")
+        if hi > 26:
+            raise LayoutError(f"family {family}: {name} above 26 is not supported; got {lo}..{hi}")
+
+
+def generate(family: str, seed: int, sizes: FamilySizes | None = None) -> Layout:
+    """The layout of ``family`` for ``seed``; named ``<family>-<seed>``."""
+    sizes = sizes or DEFAULT_SIZES.get(family, FamilySizes((0, 0), (0, 0)))
+    check_sizes(family, sizes)
+    rng = np.random.default_rng([FAMILIES.index(family), int(seed), 7919])
+    h = int(rng.integers(sizes.rows[0], sizes.rows[1] + 1))
+    w = int(rng.integers(sizes.cols[0], sizes.cols[1] + 1))
+    grid = np.full((h, w), ".", dtype="<U1")
+    walls = 1 if family == "keydoor" else 2
+    # wall columns: each room at least one column wide (two for the first room of a chain, which holds two
+    # objects besides the start); drawn in order left to right
+    cols = _wall_columns(rng, w, walls)
+    rooms = [range(0, cols[0])] + [range(a + 1, b) for a, b in zip(cols, cols[1:])] + [range(cols[-1] + 1, w)]
+    for j, c in enumerate(cols):
+        grid[:, c] = "#"
+        grid[int(rng.integers(0, h)), c] = "AB"[j]
+    cells = [[(r, c) for r in range(h) for c in room] for room in rooms]
+    if family == "keydoor":
+        placements = [("@", 0), ("a", 0), ("G", 1)]
+    else:
+        placements = [("@", 0), ("a", 0), ("b", 1), ("1", 1), ("2", 2), ("G", 2)]
+    used: set[tuple[int, int]] = set()
+    for symbol, room in placements:
+        free = [cell for cell in cells[room] if cell not in used]
+        r, c = free[int(rng.integers(0, len(free)))]
+        grid[r, c] = symbol
+        used.add((r, c))
+    if rng.random() < 0.5:  # walls horizontal instead
+        grid = grid.T
+    text = "\n".join("".join(row) for row in grid) + "\n"
+    return parse_layout(text, name=f"{family}-{seed}")
+
+
+def _wall_columns(rng: np.random.Generator, w: int, walls: int) -> list[int]:
+    first_room = 1 if walls == 1 else 2
+    while True:
+        cols = sorted(int(c) for c in rng.choice(np.arange(first_room, w - 1), size=walls, replace=False))
+        if all(b - a >= 2 for a, b in zip(cols, cols[1:])):
+            return cols
+
+
+def generate_many(family: str, seeds, sizes: FamilySizes | None = None) -> list[Layout]:
+    return [generate(family, int(s), sizes) for s in seeds]
+
+
+def check_usable(layout: Layout, max_steps: int, fail_prob: float, min_success: float = 0.99) -> None:
+    """Raise :class:`LayoutError` unless the planner finds a plan from the start and the exact optimum
+    succeeds within ``max_steps`` with probability at least ``min_success`` at ``fail_prob``."""
+    from hnsdt.oracle import optimum
+    from hnsdt.symbolic import SymbolicState, plan
+
+    start = SymbolicState.from_observation(layout, np.array([*layout.start, *[0] * layout.n_flags]))
+    if not plan(layout, start, "cost"):
+        raise LayoutError(f"layout {layout.name}: the planner finds no plan")
+    best = optimum(layout, fail_prob, max_steps)
+    if best.success < min_success:
+        raise LayoutError(f"layout {layout.name}: even the optimal policy succeeds only {best.success:.3f} of the "
+                          f"time within {max_steps} steps at fail_prob {fail_prob:g} (need {min_success:g})")
+
+
+def write_layout(layout: Layout, path: str | Path) -> Path:
+    """Write ``layout`` as a layout file (loadable by ``envs.<name>.layout`` and :func:`load_layout`)."""
+    from hnsdt.fileio import atomic_file
+
+    path = Path(path)
+    with atomic_file(path) as tmp:
+        Path(tmp).write_text(layout.text)
+    return path

@@ -1,0 +1,83 @@
+"""Observations that show the world: the grid around the agent as cell codes, the same on every layout.
+
+The paper's state ``(row, col, flags)`` never shows a wall, a key or a door, so a learner trained on it can only
+memorise one map. :func:`local_view` gives, for a batch of states, the ``(2r+1) x (2r+1)`` window of cell codes
+centred on the agent (``radius`` r; cells beyond the grid read ``OUTSIDE``). Codes name objects by identity
+(key ``a`` is the same code on every layout) and show the state: a held key or item reads as floor, an open
+door as ``DOOR_OPEN + i``. :func:`full_view` is the whole grid with the agent's cell marked.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hnsdt.envs.layout import Layout
+
+OUTSIDE, WALL, FLOOR, EXIT, AGENT = 0, 1, 2, 3, 4
+MAX_OBJECTS = 10  # keys a..j, doors A..J, items 0..9
+KEY = 5  # key a = 5, b = 6, ...
+DOOR_CLOSED = KEY + MAX_OBJECTS
+DOOR_OPEN = DOOR_CLOSED + MAX_OBJECTS
+ITEM = DOOR_OPEN + MAX_OBJECTS
+N_CODES = ITEM + MAX_OBJECTS
+CODE_NAMES = (["outside", "wall", "floor", "exit", "agent"] + [f"key {chr(97 + i)}" for i in range(MAX_OBJECTS)]
+              + [f"door {chr(65 + i)} closed" for i in range(MAX_OBJECTS)]
+              + [f"door {chr(65 + i)} open" for i in range(MAX_OBJECTS)] + [f"item {i}" for i in range(MAX_OBJECTS)])
+
+
+def _index(symbol: str) -> int:
+    i = ord(symbol.lower()) - 97 if symbol.isalpha() else int(symbol)
+    if not 0 <= i < MAX_OBJECTS:
+        raise ValueError(f"object {symbol!r}: views name at most {MAX_OBJECTS} keys, doors and items")
+    return i
+
+
+def static_codes(layout: Layout) -> np.ndarray:
+    """(H, W) codes of the layout as it starts: walls, floor, exit, keys, closed doors, items."""
+    codes = np.where(layout.walls, WALL, FLOOR).astype(np.int64)
+    codes[layout.goal] = EXIT
+    for k, cell in layout.keys.items():
+        codes[cell] = KEY + _index(k)
+    for d, cell in layout.doors.items():
+        codes[cell] = DOOR_CLOSED + _index(d)
+    for i, cell in layout.items.items():
+        codes[cell] = ITEM + _index(i)
+    return codes
+
+
+def state_codes(layout: Layout, states: np.ndarray) -> np.ndarray:
+    """(N, H, W) codes of the grid in each state: held keys and items gone, open doors open."""
+    states = np.asarray(states, dtype=np.int64).reshape(-1, 2 + layout.n_flags)
+    grids = np.repeat(static_codes(layout)[None], len(states), axis=0)
+    nk, nd = len(layout.keys), len(layout.doors)
+    for j, cell in enumerate(layout.keys.values()):
+        grids[states[:, 2 + j] == 1, cell[0], cell[1]] = FLOOR
+    for j, (d, cell) in enumerate(layout.doors.items()):
+        grids[states[:, 2 + nk + j] == 1, cell[0], cell[1]] = DOOR_OPEN + _index(d)
+    for j, cell in enumerate(layout.items.values()):
+        grids[states[:, 2 + nk + nd + j] == 1, cell[0], cell[1]] = FLOOR
+    return grids
+
+
+def local_view(layout: Layout, states: np.ndarray, radius: int) -> np.ndarray:
+    """(N, 2r+1, 2r+1) codes around the agent of each state (the agent's own cell at the centre shows what
+    lies under it)."""
+    if radius < 1:
+        raise ValueError(f"view radius must be >= 1, got {radius}")
+    states = np.asarray(states, dtype=np.int64).reshape(-1, 2 + layout.n_flags)
+    grids = state_codes(layout, states)
+    n = len(grids)
+    padded = np.full((n, grids.shape[1] + 2 * radius, grids.shape[2] + 2 * radius), OUTSIDE, dtype=np.int64)
+    padded[:, radius:-radius, radius:-radius] = grids
+    offsets = np.arange(2 * radius + 1)
+    rows = states[:, 0, None] + offsets[None, :]  # padded coordinates: the window starts at (row, col)
+    cols = states[:, 1, None] + offsets[None, :]
+    return padded[np.arange(n)[:, None, None], rows[:, :, None], cols[:, None, :]]
+
+
+def full_view(layout: Layout, states: np.ndarray) -> np.ndarray:
+    """(N, H, W) codes of the whole grid with the agent's cell marked ``AGENT``."""
+    states = np.asarray(states, dtype=np.int64).reshape(-1, 2 + layout.n_flags)
+    grids = state_codes(layout, states)
+    grids[np.arange(len(grids)), states[:, 0], states[:, 1]] = AGENT
+    return grids

@@ -1,0 +1,22 @@
+"""The base of every trained network: what the method registry and the checkpoints need to know of it."""
+
+from __future__ import annotations
+
+import torch.nn as nn
+
+
+class Network(nn.Module):
+    """A model with its config: ``class X(Network, arch="name", config=XConfig)``. ``arch`` names the
+    architecture in checkpoints (:mod:`hnsdt.models.checkpoint`), ``config_class`` the dataclass that rebuilds
+    it; ``self.cfg`` holds the instance's config."""
+
+    arch: str
+    config_class: type
+
+    def __init_subclass__(cls, arch: str, config: type, **kwargs):
+        super().__init_subclass__(**kwargs)
+        cls.arch, cls.config_class = arch, config
+
+    def __init__(self, cfg):
+        super().__init__()
+        self.cfg = cfg
