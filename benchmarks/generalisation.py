@@ -2,7 +2,8 @@
 
 Trains the view decision transformer (:mod:`hnsdt.models.view_dt`: local view around the agent, sub-goal
 targets relative to the agent) as HNSDT's low-level policy on noisy-planner episodes of ``--train-layouts``
-generated layouts of a family, then runs HNSDT (planner + executor + that DT) on the training layouts, on
+generated layouts of a family, and the same DT with no conditioning token as a pure DT (the paper's build of
+it, on the same episodes), then runs both (HNSDT: planner + executor + its DT) on the training layouts, on
 ``--test-layouts`` held-out generated layouts and, for the ``keydoor`` family, on MiniGrid-DoorKey-8x8 grids
 (our dynamics). The symbolic baseline runs on the same layouts as the reference. Not yet part of
 `dvc repro` (the issue on unseen layouts).
@@ -22,7 +23,7 @@ from hnsdt.reproducible import pin_process
 
 pin_process()
 
-from hnsdt.agents.dt_agents import HNSDTAgent  # noqa: E402
+from hnsdt.agents.dt_agents import HNSDTAgent, PureDTAgent  # noqa: E402
 from hnsdt.agents.executor import ExecutorConfig  # noqa: E402
 from hnsdt.agents.rollout import rollout  # noqa: E402
 from hnsdt.agents.symbolic import SymbolicAgent  # noqa: E402
@@ -97,20 +98,23 @@ def main() -> None:
     print(f"training frames: {len(frames):,} from {args.train_layouts} layouts ({time.perf_counter() - t0:.0f} s)")
     n_flags = splits["train"][0].n_flags
     max_offset = max(max(lay.shape) for layouts in splits.values() for lay in layouts) - 1
-    cfg = view_config("subgoal", n_flags, args.view_radius, max_offset, max_timestep=max_steps, dropout=0.1,
-                      **SIZES[args.family])
     executor = ExecutorConfig(plan_mode="cost")
     rows = {}
     for seed in args.seeds:
-        t1 = time.perf_counter()
-        model, curve = train_dt(frames, cfg, TrainConfig(epochs=args.epochs, batch_size=128, lr=1e-3, seed=seed,
-                                                          behaviours=("noisy_planner",)),
-                                progress=False, network=ViewDecisionTransformer)
-        print(f"seed {seed}: {curve[-1]['step']} gradient steps, final loss {curve[-1]['loss']:.3f} "
-              f"({time.perf_counter() - t1:.0f} s)", flush=True)
+        models = {}
+        for condition in ("subgoal", "none"):
+            t1 = time.perf_counter()
+            cfg = view_config(condition, n_flags, args.view_radius, max_offset, max_timestep=max_steps, dropout=0.1,
+                              **SIZES[args.family])
+            models[condition], curve = train_dt(frames, cfg, TrainConfig(
+                epochs=args.epochs, batch_size=128, lr=1e-3, seed=seed, behaviours=("noisy_planner",)),
+                progress=False, network=ViewDecisionTransformer)
+            print(f"seed {seed}, {condition}: {curve[-1]['step']} gradient steps, final loss {curve[-1]['loss']:.3f} "
+                  f"({time.perf_counter() - t1:.0f} s)", flush=True)
         for split, layouts in splits.items():
             for fp in args.fail_probs:
-                for name, make in (("HNSDT (view DT)", lambda lay: HNSDTAgent(lay, model, executor)),
+                for name, make in (("HNSDT (view DT)", lambda lay: HNSDTAgent(lay, models["subgoal"], executor)),
+                                   ("pure DT (view, no token)", lambda lay: PureDTAgent(models["none"], None, lay)),
                                    ("symbolic", lambda lay: SymbolicAgent(lay, executor))):
                     rows.setdefault((split, fp, name), []).append(
                         run(layouts, max_steps, fp, args.episodes, make, seed=1000 * seed))
