@@ -16,6 +16,7 @@ baseline, mean over layouts (and seeds).
 
 import argparse
 import time
+from functools import lru_cache
 
 import numpy as np
 
@@ -65,6 +66,12 @@ def training_frames(layouts, max_steps: int, episodes: int, radius: int):
     return frames_from_arrays(*(np.concatenate(parts[k]) for k in parts), policy=np.array(policy, dtype=object))
 
 
+@lru_cache(maxsize=None)
+def optimal_steps(layout, fail_prob: float, max_steps: int) -> float:
+    """The exact optimum's expected steps (one value iteration per layout and fail_prob, shared by the methods)."""
+    return optimum(layout, fail_prob, max_steps).steps
+
+
 def run(layouts, max_steps, fail_prob, episodes, make_agent, seed):
     success, ratio = [], []
     for i, layout in enumerate(layouts):
@@ -72,7 +79,7 @@ def run(layouts, max_steps, fail_prob, episodes, make_agent, seed):
         ok = [e.length for e in eps if e.success]
         success.append(len(ok) / len(eps))
         if ok:
-            ratio.append(np.mean(ok) / optimum(layout, fail_prob, max_steps).steps)
+            ratio.append(np.mean(ok) / optimal_steps(layout, fail_prob, max_steps))
     return float(np.mean(success)), float(np.mean(ratio)) if ratio else float("nan")
 
 

@@ -15,7 +15,7 @@ import yaml
 from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.data.collect import POLICIES, Behaviour, CollectConfig
 from hnsdt.envs import ENV_IDS, LayoutError, load_layout
-from hnsdt.methods import BASELINES, METHODS, PROPOSED, resolve
+from hnsdt.methods import BASELINES, DT_METHODS, METHODS, PROPOSED, resolve
 from hnsdt.params import SECTIONS, Params, validate
 
 
@@ -52,9 +52,10 @@ def typed(params: dict) -> Params:
         raise ParamsError(str(e)) from None
 
 
-def _section(params: dict, name: str):
-    """A section that the running command needs (and a partial params file may lack)."""
-    section = getattr(typed(params), name)
+def _section(params: dict, name: str, spec: Params | None = None):
+    """A section that the running command needs (and a partial params file may lack); ``spec``: the params
+    already validated by the caller."""
+    section = getattr(spec or typed(params), name)
     if section is None:
         raise _fail(params, f"missing key {name}")
     return section
@@ -66,10 +67,6 @@ def _source(params: dict) -> str:
 
 def _fail(params: dict, msg: str) -> ParamsError:
     return ParamsError(f"{_source(params)}: {msg}")
-
-
-def env_names(params: dict) -> list[str]:
-    return list(typed(params).envs)
 
 
 def env_settings(params: dict, name: str) -> dict:
@@ -153,13 +150,12 @@ def train_settings(params: dict) -> dict:
     train = _section(params, "train")
     for e in train.envs:
         env_settings(params, e)
-    dts = [name for name, m in METHODS.items() if m.stage == "train"]
     return {
         "envs": list(train.envs), "methods": list(train.methods), "seeds": list(train.seeds),
         "config": TrainConfig(epochs=train.epochs, batch_size=train.batch_size, lr=float(train.lr),
                               max_steps=train.max_steps, device=train.device),
-        "behaviours": {m: tuple(train.behaviours.get(m, [])) for m in dts},
-        "loss": {m: train.loss.get(m, LOSS_STEPS[0]) for m in dts},
+        "behaviours": {m: tuple(train.behaviours.get(m, [])) for m in DT_METHODS},
+        "loss": {m: train.loss.get(m, LOSS_STEPS[0]) for m in DT_METHODS},
     }
 
 
@@ -214,7 +210,7 @@ def baseline_settings(params: dict, method: str, env_name: str, seed: int) -> di
     section = dict(section)
     env = env_settings(params, env_name)
     lay = env["layout"]
-    device = str(pick_device(_section(params, "train").device))
+    device = str(pick_device(_section(params, "train", spec).device))
     grid = {"n_flags": lay.n_flags, "grid_h": lay.shape[0], "grid_w": lay.shape[1]}
     entry = METHODS[method]
     net_cls, train_cls = resolve(entry.network).config_class, resolve(entry.config)
@@ -238,7 +234,7 @@ def baseline_settings(params: dict, method: str, env_name: str, seed: int) -> di
         train_fixed["fail_probs"] = tuple(fail_probs(params, f"{key}.fail_probs", section["fail_probs"]))
     extra = {}
     if entry.training == "online":  # the evaluation's exploration (0 = greedy)
-        extra = {"eval_epsilon": baseline_eval_epsilon(params, method)}
+        extra = {"eval_epsilon": baseline_eval_epsilon(params, method, spec)}
     known = ({f.name for f in dataclasses.fields(net_cls)} | train_fields | set(extra)) - set(net_fixed) - {
         "seed", "device"}
     unknown = sorted(set(section) - known)
@@ -262,7 +258,7 @@ def compute_settings(params: dict, executor: str | None = None, workers: int | N
 
 def evaluate_settings(params: dict) -> dict:
     spec = typed(params)
-    evaluate, train = _section(params, "evaluate"), _section(params, "train")
+    evaluate, train = _section(params, "evaluate", spec), _section(params, "train", spec)
     if spec.logs.episodes_per_cell > evaluate.episodes:
         raise _fail(params, f"logs.episodes_per_cell must be in 0..evaluate.episodes, got "
                     f"{spec.logs.episodes_per_cell}")
@@ -276,13 +272,14 @@ def evaluate_settings(params: dict) -> dict:
         "methods": methods, "envs": list(train.envs), "seeds": list(train.seeds),
         "fail_probs": [float(f) for f in evaluate.fail_probs], "episodes": evaluate.episodes,
         "device": evaluate.device, "log_episodes": spec.logs.episodes_per_cell,
-        "train_behaviours": train_settings(params)["behaviours"][PROPOSED],
-        "eval_epsilon": {m: baseline_eval_epsilon(params, m) for m in methods if METHODS[m].training == "online"},
+        "train_behaviours": tuple(train.behaviours.get(PROPOSED, [])),
+        "eval_epsilon": {m: baseline_eval_epsilon(params, m, spec) for m in methods
+                         if METHODS[m].training == "online"},
     }
 
 
-def baseline_eval_epsilon(params: dict, method: str) -> float:
-    eps = (typed(params).baselines.model_extra or {}).get(method, {}).get("eval_epsilon", 0.0)
+def baseline_eval_epsilon(params: dict, method: str, spec: Params | None = None) -> float:
+    eps = ((spec or typed(params)).baselines.model_extra or {}).get(method, {}).get("eval_epsilon", 0.0)
     if not isinstance(eps, (int, float)) or isinstance(eps, bool) or not 0 <= eps <= 1:
         raise _fail(params, f"baselines.{method}.eval_epsilon must be a number in [0, 1], got {eps!r}")
     return float(eps)

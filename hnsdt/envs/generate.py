@@ -58,8 +58,8 @@ def check_sizes(family: str, sizes: FamilySizes) -> None:
 
 def generate(family: str, seed: int, sizes: FamilySizes | None = None) -> Layout:
     """The layout of ``family`` for ``seed``; named ``<family>-<seed>``."""
-    sizes = sizes or DEFAULT_SIZES.get(family, FamilySizes((0, 0), (0, 0)))
-    check_sizes(family, sizes)
+    sizes = sizes or DEFAULT_SIZES.get(family)
+    check_sizes(family, sizes)  # (an unknown family stops here first)
     rng = np.random.default_rng([FAMILIES.index(family), int(seed), 7919])
     h = int(rng.integers(sizes.rows[0], sizes.rows[1] + 1))
     w = int(rng.integers(sizes.cols[0], sizes.cols[1] + 1))
@@ -97,17 +97,14 @@ def _wall_columns(rng: np.random.Generator, w: int, walls: int) -> list[int]:
             return cols
 
 
-def generate_many(family: str, seeds, sizes: FamilySizes | None = None) -> list[Layout]:
-    return [generate(family, int(s), sizes) for s in seeds]
-
-
 def check_usable(layout: Layout, max_steps: int, fail_prob: float, min_success: float = 0.99) -> None:
     """Raise :class:`LayoutError` unless the planner finds a plan from the start and the exact optimum
     succeeds within ``max_steps`` with probability at least ``min_success`` at ``fail_prob``."""
+    from hnsdt.envs.dynamics import Rules
     from hnsdt.oracle import optimum
     from hnsdt.symbolic import SymbolicState, plan
 
-    start = SymbolicState.from_observation(layout, np.array([*layout.start, *[0] * layout.n_flags]))
+    start = SymbolicState.from_observation(layout, Rules(layout).initial_states(1)[0])
     if not plan(layout, start, "cost"):
         raise LayoutError(f"layout {layout.name}: the planner finds no plan")
     best = optimum(layout, fail_prob, max_steps)

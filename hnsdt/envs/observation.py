@@ -9,6 +9,8 @@ door as ``DOOR_OPEN + i``. :func:`full_view` is the whole grid with the agent's 
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from hnsdt.envs.layout import Layout
@@ -20,9 +22,6 @@ DOOR_CLOSED = KEY + MAX_OBJECTS
 DOOR_OPEN = DOOR_CLOSED + MAX_OBJECTS
 ITEM = DOOR_OPEN + MAX_OBJECTS
 N_CODES = ITEM + MAX_OBJECTS
-CODE_NAMES = (["outside", "wall", "floor", "exit", "agent"] + [f"key {chr(97 + i)}" for i in range(MAX_OBJECTS)]
-              + [f"door {chr(65 + i)} closed" for i in range(MAX_OBJECTS)]
-              + [f"door {chr(65 + i)} open" for i in range(MAX_OBJECTS)] + [f"item {i}" for i in range(MAX_OBJECTS)])
 
 
 def _index(symbol: str) -> int:
@@ -32,8 +31,10 @@ def _index(symbol: str) -> int:
     return i
 
 
+@lru_cache(maxsize=256)
 def static_codes(layout: Layout) -> np.ndarray:
-    """(H, W) codes of the layout as it starts: walls, floor, exit, keys, closed doors, items."""
+    """(H, W) codes of the layout as it starts: walls, floor, exit, keys, closed doors, items. Computed once per
+    layout (an agent asks every step) and read-only."""
     codes = np.where(layout.walls, WALL, FLOOR).astype(np.int64)
     codes[layout.goal] = EXIT
     for k, cell in layout.keys.items():
@@ -42,6 +43,7 @@ def static_codes(layout: Layout) -> np.ndarray:
         codes[cell] = DOOR_CLOSED + _index(d)
     for i, cell in layout.items.items():
         codes[cell] = ITEM + _index(i)
+    codes.setflags(write=False)
     return codes
 
 

@@ -21,9 +21,8 @@ from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.agents.rollout import Episode, rollout
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv
-from hnsdt.methods import ARMS
+from hnsdt.methods import ARMS, resolve
 from hnsdt.methods import method as lookup_method
-from hnsdt.methods import resolve
 
 
 @dataclass

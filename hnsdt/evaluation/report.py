@@ -7,6 +7,7 @@ came from, as recorded in ``dvc.lock`` by the stages that produced them.
 from __future__ import annotations
 
 import json
+from functools import lru_cache
 from pathlib import Path
 
 import matplotlib
@@ -253,7 +254,9 @@ def _target_lines(summ: pd.DataFrame) -> list[str]:
 CLAIMS = Path(__file__).with_name("paper_claims.yaml")  # the paper's claims, as data
 
 
+@lru_cache(maxsize=4)
 def paper_claims(path: str | Path = CLAIMS) -> dict:
+    """The claims file, read once (callers only read the mapping)."""
     return yaml.safe_load(Path(path).read_text())
 
 
@@ -565,13 +568,13 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
             fail_probs=[f"{f:g}" for f in sorted(set(summ.fail_prob))],
             episodes_per_cell=int(episodes.groupby(["method", "env", "fail_prob", "seed"]).size().max()),
             revision=rev, digest=digest, inputs=inputs, paradigms=PARADIGMS,
-            optimum=_optimum_table(summ).split("\n") if has_optimum else [],
+            optimum=_optimum_table(summ) if has_optimum else "",
             target=_target_lines(summ) if has_optimum else [],
             claims=claims if len(claims) > 2 else [], within_std=paper_claims()["within_std"],
             arms=arms, paper_claims=paper_claims_lines, paper_hnsdt=_label(PAPER_ARM[PROPOSED]),
             paper_pure_dt=", ".join(_label(m) for m in paper_pure_dt),
             seeds_table=seed_lines(view), solved=f"{SOLVED:.0%}", bootstrap=f"{BOOTSTRAP:,}", usage=usage,
-            numbers=_table(numbers).split("\n"), recorded=len(recorded),
+            numbers=_table(numbers), recorded=len(recorded),
             example_episode=recorded.episode_id.iloc[0] if len(recorded) else "")
         (tmp / "report.md").write_text(text)
         theorem_data = {**theorem_data, "claims": claim_rows} if claim_rows else theorem_data
