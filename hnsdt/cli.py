@@ -153,7 +153,8 @@ def cmd_report(args) -> None:
     from hnsdt.config import load_params
     from hnsdt.evaluation.report import write_report
 
-    path = write_report(load_params(args.params), Path(args.results), Path(args.out))
+    path = write_report(load_params(args.params), Path(args.results), Path(args.out),
+                        generalisation=Path(args.generalisation) if args.generalisation else None)
     print(f"wrote {path}")
 
 
@@ -217,6 +218,34 @@ def _open_in_rerun(rrds: list[Path]) -> None:
         raise FileNotFoundError("the rerun viewer is not on PATH (it ships with rerun-sdk in .venv/bin)")
     subprocess.Popen([viewer, *map(str, rrds)])
 
+
+
+def cmd_generalisation(args) -> None:
+    """The unseen-layout experiment's stages (hnsdt.generalisation): collect, train one method, evaluate."""
+    from hnsdt import generalisation as gen
+    from hnsdt.config import compute_settings, load_params
+    from hnsdt.provenance import git_revision, params_digest
+
+    params = load_params(args.params)
+    gen.settings(params)  # "missing key generalisation" before any work
+    if args.action == "collect":
+        provenance = {"git_revision": git_revision(), "params_digest": params_digest(params)}
+        root = gen.collect(params, Path(args.out), provenance, progress=not args.quiet)
+        print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
+        return
+    compute = compute_settings(params, args.executor, args.workers)
+    if args.action == "train":
+        from hnsdt.training import train_all
+
+        if not args.method or not args.curves:
+            raise ValueError("generalisation train needs --method and --curves")
+        runs = gen.plan_runs(params, args.method, Path(args.dataset))
+        train_all(runs, gen.settings(params).family, Path(args.out), Path(args.curves), compute,
+                  progress=not args.quiet)
+        print(f"wrote {', '.join(f'seed{r[1]}' for r in runs)} -> {args.out}/ (curves: {args.curves}/)")
+        return
+    table = gen.evaluate(params, Path(args.models), Path(args.out), compute, progress=not args.quiet)
+    print(f"wrote {args.out}/episodes.csv ({len(table)} episodes), summary.csv, layouts.csv")
 
 
 def _compute_arguments(p: argparse.ArgumentParser) -> None:
@@ -300,8 +329,25 @@ def build_parser() -> argparse.ArgumentParser:
     _compute_arguments(p)
     p.set_defaults(func=cmd_evaluate)
 
+    p = sub.add_parser("generalisation", help="the unseen-layout experiment: collect on generated layouts, "
+                       "train a method on views, evaluate on training / held-out / MiniGrid layouts (the "
+                       "`*_generalisation` stages)")
+    p.add_argument("action", choices=["collect", "train", "evaluate"])
+    p.add_argument("--out", required=True, help="collect: dataset folder; train: checkpoints folder (one seedK/ "
+                   "per seed); evaluate: results folder")
+    p.add_argument("--method", choices=LEARNED, help="train: the method")
+    p.add_argument("--dataset", default="generalisation/dataset", help="train: the collected dataset")
+    p.add_argument("--curves", help="train: training-curve folder")
+    p.add_argument("--models", default="generalisation/models", help="evaluate: checkpoint root, one folder per "
+                   "method")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    _compute_arguments(p)
+    p.set_defaults(func=cmd_generalisation)
+
     p = sub.add_parser("report", help="figures and report.md from the evaluation (the `report` stage)")
     p.add_argument("--results", default="results")
+    p.add_argument("--generalisation", help="results of the unseen-layout experiment (e.g. generalisation/results); "
+                   "without it the report has no such section")
     p.add_argument("--out", default="report")
     p.set_defaults(func=cmd_report)
 

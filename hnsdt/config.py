@@ -193,9 +193,10 @@ def _fill(params: dict, key: str, cls, section: dict, **fixed):
         raise _fail(params, f"{key}: {e}") from None
 
 
-def baseline_settings(params: dict, method: str, env_name: str, seed: int) -> dict:
+def baseline_settings(params: dict, method: str, env_name: str, seed: int, env: dict | None = None) -> dict:
     """Network config, training config and evaluation knobs of one baseline on one env and seed, from
-    ``baselines.<method>``; unknown keys and wrongly typed values are errors."""
+    ``baselines.<method>``; unknown keys and wrongly typed values are errors. ``env`` (layout, max_steps)
+    replaces ``envs.<env_name>`` (the generalisation experiment: ``env_name`` is then its family)."""
     import dataclasses
 
     from hnsdt.models.train import pick_device
@@ -208,7 +209,7 @@ def baseline_settings(params: dict, method: str, env_name: str, seed: int) -> di
     if section is None:
         raise _fail(params, f"missing key {key} (the knobs of {method})")
     section = dict(section)
-    env = env_settings(params, env_name)
+    env = env or env_settings(params, env_name)
     lay = env["layout"]
     device = str(pick_device(_section(params, "train", spec).device))
     grid = {"n_flags": lay.n_flags, "grid_h": lay.shape[0], "grid_w": lay.shape[1]}

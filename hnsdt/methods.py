@@ -39,6 +39,7 @@ class Method:
     fixed: dict[str, Any] = field(default_factory=dict)  # network knobs the method fixes (not in params.yaml)
     condition: str = ""  # decision transformers: what conditions the model (hnsdt.models.dt.CONDITIONS)
     arm: str = "ours"  # "ours" or "paper": which planner settings (params `planner` / `planner.paper`) it uses
+    view_network: str = ""  # "module:Class" of the same model reading the grid around the agent (unseen layouts)
 
 
 PARADIGMS = ("RNN", "traditional RL", "pure transformer", "symbolic", "neuro-symbolic")
@@ -46,21 +47,24 @@ ARMS = ("ours", "paper")
 
 _DT = dict(training="dataset", stage="train", agent="hnsdt.agents.dt_agents:make_agent",
            network="hnsdt.models.dt:DecisionTransformer", config="hnsdt.models.train:TrainConfig",
-           trainer="hnsdt.models.train:train_decision_transformer")
+           trainer="hnsdt.models.train:train_decision_transformer",
+           view_network="hnsdt.models.view:ViewDecisionTransformer")
 _RNN = dict(training="dataset", stage="train_offline", agent="hnsdt.agents.baselines.recurrent:make_agent",
             network="hnsdt.models.recurrent:RecurrentPolicy",
             config="hnsdt.agents.baselines.recurrent:RecurrentTrainConfig",
-            trainer="hnsdt.agents.baselines.recurrent:train_recurrent")
+            trainer="hnsdt.agents.baselines.recurrent:train_recurrent",
+            view_network="hnsdt.models.view:ViewRecurrentPolicy")
 
 METHODS = {m.name: m for m in (
     Method("lstm_hier", "LSTM hierarchical", "RNN", **_RNN, fixed={"cell": "lstm", "hierarchical": True}),
     Method("gru", "GRU sequential", "RNN", **_RNN, fixed={"cell": "gru", "hierarchical": False}),
     Method("dqn", "DQN", "traditional RL", "online", "train_online", "hnsdt.agents.baselines.dqn:make_agent",
            "hnsdt.models.qnetwork:QNetwork", "hnsdt.agents.baselines.dqn:DQNConfig",
-           "hnsdt.agents.baselines.dqn:train_dqn"),
+           "hnsdt.agents.baselines.dqn:train_dqn", view_network="hnsdt.models.view:ViewQNetwork"),
     Method("options", "Options (option-critic)", "traditional RL", "online", "train_online",
            "hnsdt.agents.baselines.options:make_agent", "hnsdt.models.qnetwork:OptionCritic",
-           "hnsdt.agents.baselines.options:OptionsConfig", "hnsdt.agents.baselines.options:train_options"),
+           "hnsdt.agents.baselines.options:OptionsConfig", "hnsdt.agents.baselines.options:train_options",
+           view_network="hnsdt.models.view:ViewOptionCritic"),
     Method("pure_dt", "Pure DT", "pure transformer", **_DT, condition="return"),
     Method("symbolic", "BFS + controllers", "symbolic", "none", "", "hnsdt.agents.symbolic:make_agent"),
     Method("hnsdt", "HNSDT (ours)", "neuro-symbolic", **_DT, condition="subgoal"),
@@ -69,6 +73,7 @@ METHODS = {m.name: m for m in (
 )}
 
 PROPOSED = "hnsdt"  # the paper's method: the theorems' subject and the report's reference line
+REFERENCE = "symbolic"  # needs no training: the unseen-layout experiment runs it on every split as the reference
 PAPER_ARM = {"hnsdt": "hnsdt_paper", "pure_dt": "pure_dt_paper"}  # each of our transformers -> the paper's build
 DT_METHODS = tuple(m.name for m in METHODS.values() if m.stage == "train")  # configured under `train`
 OFFLINE_BASELINES = tuple(m.name for m in METHODS.values() if m.stage == "train_offline")  # `baselines.offline`
@@ -93,6 +98,15 @@ def resolve(ref: str) -> Any:
 def architectures() -> dict[str, str]:
     """Checkpoint architecture name -> model class reference, over every registered network."""
     out = {}
-    for ref in dict.fromkeys(m.network for m in METHODS.values() if m.network):
+    for ref in dict.fromkeys(r for m in METHODS.values() for r in (m.network, m.view_network) if r):
         out[resolve(ref).arch] = ref
     return out
+
+
+def network_for(name: str, cfg) -> type:
+    """The class of ``name``'s network that ``cfg`` configures: its ``network`` or its ``view_network``."""
+    entry = method(name)
+    for ref in (entry.network, entry.view_network):
+        if ref and resolve(ref).config_class is type(cfg):
+            return resolve(ref)
+    raise ValueError(f"{name}: no network of this method is configured by a {type(cfg).__name__}")

@@ -15,8 +15,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 
 from hnsdt.data.collect import POLICIES, STARTS
 from hnsdt.data.windows import LOSS_STEPS
+from hnsdt.envs.generate import FAMILIES
 from hnsdt.executor import EXECUTORS
-from hnsdt.methods import BASELINES, DT_METHODS, METHODS, OFFLINE_BASELINES, ONLINE_BASELINES
+from hnsdt.methods import BASELINES, DT_METHODS, LEARNED, METHODS, OFFLINE_BASELINES, ONLINE_BASELINES
 from hnsdt.symbolic.operators import OPERATOR_SETS
 from hnsdt.symbolic.planner import PLAN_MODES
 
@@ -123,6 +124,48 @@ class EvaluateParams(Section):
     device: str = "cpu"
 
 
+class MiniGridSource(Section):
+    id: str = Field(description="a MiniGrid DoorKey id, e.g. MiniGrid-DoorKey-8x8-v0")
+    layouts: PositiveInt = Field(description="its grids of seeds 0..layouts-1")
+    max_steps: PositiveInt = Field(description="episode step limit on these grids")
+
+
+class GeneralisationParams(Section):
+    """The unseen-layout experiment (README, "Unseen layouts"): learners that read the grid around the agent,
+    trained on generated layouts, evaluated on them, on held-out ones and on MiniGrid's grids."""
+
+    family: Literal[FAMILIES] = Field("keydoor", description="generated family (hnsdt.envs.generate)")
+    train_layouts: PositiveInt = Field(description="training layouts: the family's seeds 0..N-1")
+    heldout_layouts: int = Field(ge=0, description="held-out layouts: seeds 100000.. (never in training)")
+    evaluated_train_layouts: int = Field(ge=0, description="the first this many training layouts are evaluated")
+    minigrid: list[MiniGridSource] = Field(default_factory=list, description="MiniGrid grids, zero-shot")
+    max_steps: PositiveInt = Field(description="episode step limit on generated layouts")
+    view_radius: PositiveInt = Field(2, description="the learners see (2r+1) x (2r+1) cells around the agent")
+    episodes_per_layout: PositiveInt = Field(description="noisy-planner episodes per training layout and start "
+                                             "(the layout's start and random starts)")
+    epsilon: Probability = Field(0.1, description="the noisy planner's share of random actions")
+    methods: list[Literal[DT_METHODS]] = Field(default_factory=list, description="decision transformers (knobs: "
+                                               "train, models.<family>)")
+    baselines: list[Literal[BASELINES]] = Field(default_factory=list, description="the other learned methods "
+                                                "(knobs: baselines.<method>); the symbolic one is the reference")
+    seeds: list[int] = Field(min_length=1)
+    episodes: PositiveInt = Field(description="evaluation episodes per method x seed x layout x fail_prob")
+    budgets: dict[Literal[LEARNED], dict[str, Any]] = Field(
+        default_factory=dict, description="per method, training knobs that replace the paper protocol's here "
+        "(the fields of its training config, e.g. epochs, max_steps, env_steps)")
+
+    @field_validator("methods", "baselines", "seeds")
+    @classmethod
+    def _unique(cls, value):
+        if len(set(value)) != len(value):
+            raise ValueError(f"must not repeat an entry, got {value}")
+        return value
+
+    @property
+    def learned(self) -> list[str]:
+        return [*self.methods, *self.baselines]
+
+
 class LogsParams(Section):
     episodes_per_cell: int = Field(1, ge=0, description="rerun + MCAP recordings per method x env x fail_prob "
                                    "(first seed)")
@@ -163,6 +206,7 @@ class Params(Section):
     logs: LogsParams = LogsParams()
     compute: ComputeParams = ComputeParams()
     theorems: TheoremsParams | None = None
+    generalisation: GeneralisationParams | None = None
 
 
 SECTIONS = tuple(Params.model_fields)

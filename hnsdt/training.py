@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hnsdt.methods import METHODS, resolve
+from hnsdt.methods import METHODS, network_for, resolve
 
 
 def plan_runs(params: dict, env: str, method: str, seeds: list[int], dataset: Path) -> list[tuple]:
@@ -85,8 +85,9 @@ def train_run(method: str, seed: int, model_cfg, train_cfg, data, facts: dict, p
     """Train one seed from scratch: ``(model, checkpoint facts, curve)``."""
     desc = f"{method} seed {seed}"
     trainer = resolve(METHODS[method].trainer)
-    args = data if METHODS[method].training == "online" else (data,)  # online: (layout, max_steps)
-    model, curve, usage = trainer(*args, model_cfg, train_cfg, progress=progress, desc=desc)
+    args = data if METHODS[method].training == "online" else (data,)  # online: (layout(s), max_steps)
+    model, curve, usage = trainer(*args, model_cfg, train_cfg, progress=progress, desc=desc,
+                                  network=network_for(method, model_cfg))
     model.cpu()
     return model, {"seed": seed, **facts, "train": asdict(train_cfg), "usage": usage, "curve": curve}, curve
 

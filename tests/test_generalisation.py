@@ -136,7 +136,7 @@ def test_the_view_dt_reads_nothing_tied_to_one_map():
     the same offset from the agent) get the same action logits: the model cannot memorise absolute cells."""
     import torch
 
-    from hnsdt.models.view_dt import ViewDecisionTransformer, view_config
+    from hnsdt.models.view import ViewDecisionTransformer, view_config
 
     torch.manual_seed(0)
     cfg = view_config("subgoal", n_flags=2, view_radius=1, max_offset=9, context=3, n_layers=1, n_heads=2,
@@ -172,7 +172,7 @@ def test_hnsdt_with_the_view_dt_trains_on_some_layouts_and_runs_on_others():
     from hnsdt.data.windows import frames_from_arrays
     from hnsdt.envs.minigrid_adapter import from_minigrid
     from hnsdt.models.train import TrainConfig, train_dt
-    from hnsdt.models.view_dt import ViewDecisionTransformer, view_config, view_states
+    from hnsdt.models.view import ViewDecisionTransformer, view_config, view_states
 
     parts, n = [], 0
     for i, layout in enumerate([generate("keydoor", 0), generate("keydoor", 1)]):
@@ -191,3 +191,185 @@ def test_hnsdt_with_the_view_dt_trains_on_some_layouts_and_runs_on_others():
     for layout in (generate("keydoor", 500), from_minigrid("MiniGrid-DoorKey-8x8-v0", 5)):
         episodes = rollout(KeyDoorVectorEnv(3, layout, 0.1, 30), HNSDTAgent(layout, model, ExecutorConfig()), seed=0)
         assert len(episodes) == 3 and all(1 <= ep.length <= 30 for ep in episodes)
+
+
+# -- the protocol: every learned method on views, the layout pool, the dataset, the stages' functions --------
+
+def _tiny_generalisation_params(tmp_path=None) -> dict:
+    """The repository's params with a tiny unseen-layout experiment (as the pipeline test's tiny repo)."""
+    import sys
+    from pathlib import Path
+
+    import yaml
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from tiny_repo import REPO, tiny_params
+
+    path = (tmp_path or Path(__import__("tempfile").mkdtemp())) / "params.yaml"
+    path.write_text((REPO / "params.yaml").read_text())
+    tiny_params(path)
+    params = yaml.safe_load(path.read_text())
+    params["envs"]["keydoor"]["layout"] = str(REPO / params["envs"]["keydoor"]["layout"])
+    return params
+
+
+def _view_network(name: str, radius: int):
+    """The registry's view network of ``name`` at a tiny size."""
+    from hnsdt.methods import METHODS, resolve
+    from hnsdt.models.view import view_config
+
+    entry = METHODS[name]
+    cls = resolve(entry.view_network)
+    if entry.stage == "train":
+        return cls(view_config(entry.condition, 2, radius, 9, context=3, n_layers=1, n_heads=2, d_model=16,
+                               max_timestep=50))
+    small = {"hidden": 8, "embed": 8} if entry.training == "dataset" else {"hidden": 8}
+    return cls(cls.config_class(n_flags=2, grid_h=1, grid_w=1, view_radius=radius, **entry.fixed, **small))
+
+
+@pytest.mark.parametrize("name", ["hnsdt", "pure_dt", "lstm_hier", "gru", "dqn", "options"])
+def test_every_learned_method_has_a_view_network_that_never_reads_the_absolute_cell(name):
+    """The same views and flags at two far-apart cells (one outside any grid the network was sized for) give
+    the same outputs; another view gives other outputs."""
+    import torch
+
+    from hnsdt.methods import METHODS
+
+    torch.manual_seed(0)
+    model = _view_network(name, 1).eval()
+    rng = np.random.default_rng(1)
+    codes, flags = rng.integers(0, 8, (2, 3, 9)), rng.integers(0, 2, (2, 3, 2))
+
+    def out(row, col, codes=codes):
+        pos = np.broadcast_to(np.array([row, col]), (2, 3, 2))
+        states = torch.from_numpy(np.concatenate([pos, codes, flags], axis=-1).astype(np.int64))
+        with torch.no_grad():
+            if METHODS[name].stage == "train":  # a window, the target 2 cells to the right of the agent
+                kw = {"actions": torch.zeros(2, 3, dtype=torch.long), "timesteps": torch.arange(3).repeat(2, 1),
+                      "pad": torch.zeros(2, 3, dtype=torch.bool)}
+                if model.cfg.condition == "subgoal":
+                    kw |= {"subgoal_ids": torch.tensor([3, 3]), "subgoal_targets": torch.tensor([[row, col + 2]] * 2)}
+                if model.cfg.condition == "return":
+                    kw |= {"returns": torch.ones(2, 3)}
+                return model(states, **kw)
+            if METHODS[name].training == "dataset":
+                return model(states, torch.zeros(2, 3, dtype=torch.long))[0]
+            result = model(states[:, 0])
+            return result if isinstance(result, torch.Tensor) else torch.cat([r.flatten(1) for r in result], 1)
+
+    assert torch.allclose(out(1, 1), out(40, 77), atol=1e-6)
+    assert not torch.allclose(out(1, 1), out(1, 1, codes=(codes + 1) % 8))
+
+
+def test_the_layout_pool_steps_each_copy_on_its_own_layout_with_the_shared_rules():
+    """Copies draw layouts at reset (seeded) and observe view states; with no failures their trajectories are
+    those of each layout's own vector env under the same actions."""
+    from hnsdt.envs.pool import LayoutPoolVectorEnv
+    from hnsdt.models.view import view_states
+
+    layouts = [generate("keydoor", s) for s in range(3)]
+    env = LayoutPoolVectorEnv(layouts, 6, 0.0, 40, 2)
+    obs, _ = env.reset(seed=0)
+    which = env.which.copy()
+    assert len(set(which.tolist())) > 1  # the copies play different maps
+    assert (LayoutPoolVectorEnv(layouts, 6, 0.0, 40, 2).reset(seed=0)[0] == obs).all()  # seeded
+    refs = [KeyDoorVectorEnv(1, layouts[w], 0.0, 40) for w in which]
+    starts = [ref.reset(seed=0)[0] for ref in refs]
+    for i in range(6):
+        assert (obs[i] == view_states(layouts[which[i]], starts[i], 2)[0]).all()
+    rng = np.random.default_rng(0)
+    for _ in range(40):
+        actions = rng.integers(0, 5, 6)
+        obs, reward, term, trunc, _ = env.step(actions)
+        for i, ref in enumerate(refs):
+            s, r, t, tr, _ = ref.step(actions[i:i + 1])
+            assert (obs[i] == view_states(layouts[which[i]], s, 2)[0]).all()
+            assert (reward[i], term[i], trunc[i]) == (r[0], t[0], tr[0])
+    with pytest.raises(ValueError, match="same flags"):
+        LayoutPoolVectorEnv([layouts[0], generate("multikeydoor", 0)], 2, 0.0, 40, 2)
+
+
+def test_the_dataset_over_generated_layouts_stores_each_frames_view(tmp_path):
+    """`collect` writes one LeRobot dataset over the training layouts: stock LeRobotDataset loads it, each frame's
+    `observation.view` is the view of its own layout at its state, the card describes the feature, and the
+    frames the learners read are view states."""
+    from hnsdt import generalisation as gen
+    from hnsdt.data.lerobot_io import open_dataset
+    from hnsdt.data.windows import load_frames
+    from hnsdt.models.view import view_states
+
+    params = _tiny_generalisation_params(tmp_path)
+    root = gen.collect(params, tmp_path / "ds", {"git_revision": "test"}, progress=False)
+    ds = open_dataset(root)
+    cols = ds.hf_dataset.with_format("numpy")[:]
+    layouts = [s.layout for s in gen.layout_splits(params) if s.split == "train"]
+    assert sorted(set(np.ravel(cols["layout_index"]).tolist())) == list(range(len(layouts)))
+    for state, view, li in zip(cols["observation.state"], cols["observation.view"], np.ravel(cols["layout_index"])):
+        assert (view == local_view(layouts[li], state[None], 2).ravel()).all()
+    card = (root / "README.md").read_text()
+    assert "`observation.view`" in card and f"on {len(layouts)} generated layouts" in card
+    frames = load_frames(root)
+    assert frames.states.shape[1] == 2 + 25 + layouts[0].n_flags
+    first = np.stack(cols["observation.state"])[:1]
+    assert (frames.states[0] == view_states(layouts[int(np.ravel(cols["layout_index"])[0])], first, 2)[0]).all()
+
+
+def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp_path):
+    """The stages' functions at a tiny budget: each method trains on the dataset (or the layout pool) into its
+    view network, and the evaluation has one row per method x seed x layout x fail_prob x episode, each with its
+    split, the symbolic reference included, and the exact optimum's steps."""
+    import pandas as pd
+
+    from hnsdt import generalisation as gen
+    from hnsdt.executor import Compute
+    from hnsdt.models.checkpoint import save_checkpoint
+    from hnsdt.training import train_run
+
+    params = _tiny_generalisation_params(tmp_path)
+    g = params["generalisation"]
+    g.update(methods=["hnsdt"], baselines=["gru", "dqn"])
+    dataset = gen.collect(params, tmp_path / "ds", {}, progress=False)
+    for method in g["methods"] + g["baselines"]:
+        (run,) = gen.plan_runs(params, method, dataset)
+        model, facts, _ = train_run(*run)
+        assert type(model).__name__.startswith("View")
+        save_checkpoint(model, tmp_path / "models" / method / "seed0", {"method": method, **facts})
+    table = gen.evaluate(params, tmp_path / "models", tmp_path / "results", Compute(workers=1), progress=False)
+    assert set(table.method) == {"hnsdt", "gru", "dqn", "symbolic"}
+    assert set(table.split) == {"train", "heldout", "minigrid"}
+    assert len(table) == 4 * 3 * 2 * 2
+    assert (table.optimal_steps > 0).all() and table[table.method == "symbolic"].success.all()
+    summary = pd.read_csv(tmp_path / "results/summary.csv")
+    assert len(summary) == 4 * 3 * 2 and summary.success_mean.between(0, 1).all()
+    with pytest.raises(ValueError, match="not in generalisation.methods"):
+        gen.plan_runs(params, "options", dataset)
+
+
+def test_a_bad_generalisation_knob_is_one_line_naming_it():
+    from hnsdt.params import validate
+
+    params = _tiny_generalisation_params()
+    params["generalisation"]["family"] = "maze"
+    with pytest.raises(ValueError, match=r"^params: generalisation.family: Input should be 'keydoor' or"):
+        validate(params)
+    params["generalisation"].update(family="keydoor", methods=["hnsdt", "hnsdt"])
+    with pytest.raises(ValueError, match="generalisation.methods: must not repeat"):
+        validate(params)
+
+
+def test_a_methods_budget_replaces_the_protocols_knobs_and_a_bad_one_is_named():
+    from hnsdt import generalisation as gen
+    from hnsdt.config import ParamsError
+
+    params = _tiny_generalisation_params()
+    params["generalisation"]["budgets"] = {"gru": {"epochs": 3, "lr": 1}, "dqn": {"env_steps": 123}}
+    _, train_cfg = gen.network_configs(params, "gru", 0)
+    assert (train_cfg.epochs, train_cfg.lr) == (3, 1.0)
+    assert gen.network_configs(params, "dqn", 1)[1].env_steps == 123
+    assert gen.network_configs(params, "lstm_hier", 0)[1].epochs == params["baselines"]["lstm_hier"]["epochs"]
+    params["generalisation"]["budgets"] = {"gru": {"epoch": 3}}
+    with pytest.raises(ParamsError, match=r"generalisation.budgets.gru: unknown key epoch; expected one of"):
+        gen.network_configs(params, "gru", 0)
+    params["generalisation"]["budgets"] = {"gru": {"epochs": "3"}}
+    with pytest.raises(ParamsError, match=r"generalisation.budgets.gru.epochs must be int, got '3'"):
+        gen.network_configs(params, "gru", 0)

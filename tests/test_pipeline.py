@@ -22,6 +22,11 @@ from tiny_repo import REPO, lock_outs, make_tiny_repo, ran_stages, run
 pytestmark = pytest.mark.slow  # (pytest-xdist runs a file on one worker, in order: `--dist loadfile`)
 BIN = Path(sys.executable).parent
 STAGES = {m: METHODS[m].stage for m in LEARNED}  # learned method -> its DVC stage
+_UNSEEN = yaml.safe_load((REPO / "params.yaml").read_text())["generalisation"]  # the unseen-layout experiment
+UNSEEN = _UNSEEN["methods"] + _UNSEEN["baselines"]
+UNSEEN_STAGES = {"collect_generalisation", "evaluate_generalisation"} | {
+    f"train_generalisation@{m}" for m in _UNSEEN["methods"]} | {
+    f"train_generalisation_baselines@{m}" for m in _UNSEEN["baselines"]}
 GIT_TRACKED_OUTS = {"metrics/summary.csv", "metrics/metrics.json"}  # outputs with `cache: false`: in git, and
 # changed by a run with other params
 ENV = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")  # the log as it happens
@@ -76,7 +81,7 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     from hnsdt.data.lerobot_io import open_dataset
 
     ran = ran_stages(first_run[0])
-    assert ran == {"collect@keydoor", "evaluate", "report"} | {f"{STAGES[m]}@keydoor-{m}" for m in STAGES}
+    assert ran == {"collect@keydoor", "evaluate", "report"} | {f"{STAGES[m]}@keydoor-{m}" for m in STAGES} | UNSEEN_STAGES
     assert open_dataset(repo_copy / "data/datasets/keydoor").meta.total_episodes == 9
     for method in STAGES:
         assert (repo_copy / f"models/keydoor/{method}/seed0/model.safetensors").is_file()
@@ -105,6 +110,12 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     assert "figures/paradigms.png" in report and "Agreement with the paper's claims" in report
     assert "The paper's own configuration" in report and (repo_copy / "recordings/foxglove_layout.json").is_file()
     assert "figures/environments.png" in report  # the paper's Figures 2 and 3, from the layout files
+    # the unseen-layout experiment: every method (and the reference) on every split, in the report
+    unseen = pd.read_csv(repo_copy / "generalisation/results/episodes.csv")
+    assert set(unseen.method) == set(UNSEEN) | {"symbolic"} and set(unseen.split) == {"train", "heldout", "minigrid"}
+    assert len(unseen) == (len(UNSEEN) + 1) * 3 * 2 * 2  # methods x layouts (1 per split) x fail_probs x episodes
+    assert "## Unseen layouts" in report and (repo_copy / "report/figures/generalisation.png").is_file()
+    assert lock["stages"]["collect_generalisation"]["outs"][0]["md5"] in report
     assert (repo_copy / "report/figures/environments.png").stat().st_size > 10_000
     rrds = sorted((repo_copy / "recordings").rglob("*.rrd"))
     verify = subprocess.run([str(Path(sys.executable).parent / "rerun"), "rrd", "verify", *map(str, rrds)],
@@ -219,7 +230,7 @@ def test_a_changed_knob_reruns_only_the_stages_that_read_it(repo_copy, first_run
     params = (repo_copy / "params.yaml").read_text()
 
     _set(repo_copy, "baselines.dqn", "lr", 0.001)  # one method's knob: only its instances retrain
-    assert _changed_stages(repo_copy) == {"train_online@keydoor-dqn"}
+    assert _changed_stages(repo_copy) == {"train_online@keydoor-dqn", "train_generalisation_baselines@dqn"}
     (repo_copy / "params.yaml").write_text(params)
 
     _set(repo_copy, "envs.keydoor", "max_steps", 60)  # one env's knob: everything on that env

@@ -43,6 +43,9 @@ def tiny_params(path: Path) -> None:
     for method in params["baselines"]["online"]:
         params["baselines"][method].update(env_steps=400, learning_starts=200)
     params["evaluate"].update(episodes=4, fail_probs=[0.0, 0.2])
+    params["generalisation"].update(train_layouts=3, evaluated_train_layouts=1, heldout_layouts=1, seeds=[0],
+                                    episodes_per_layout=2, episodes=2, budgets={})  # the tiny knobs above
+    params["generalisation"]["minigrid"] = [{"id": "MiniGrid-DoorKey-8x8-v0", "layouts": 1, "max_steps": 100}]
     path.write_text(yaml.safe_dump(params, sort_keys=False))
 
 

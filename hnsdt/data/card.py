@@ -40,18 +40,27 @@ FEATURES = [  # (feature, meaning); dtypes and shapes come from meta/info.json o
     ("task", "the `subgoal`'s name, e.g. `GoTo(key a)`"),
     ("observation.image", "the grid drawn at this step (walls, keys, doors open or closed, items, exit, the agent "
                           "as a disc), as video; only with `collect.render` > 0"),
+    ("observation.view", "the (2r+1)×(2r+1) cells around the agent, row-major, as codes: 0 outside the map, 1 wall, "
+                         "2 floor, 3 exit, 4 the agent, 5+k key k (a = 0), 15+k closed door, 25+k open door, 35+k "
+                         "item k (`hnsdt.envs.observation`); a key or item the agent holds is no longer drawn"),
+    ("layout_index", "which of the dataset's layouts the episode was played on (`layout_texts` in meta/hnsdt.json)"),
 ]
+VIEW_FEATURES = ("observation.view", "layout_index")
 
 
-def description(cfg, episodes: list[dict], provenance: dict) -> str:
-    """The card's body: what the data are, how they were made, what they cover."""
+def description(cfg, episodes: list[dict], provenance: dict, layouts=None) -> str:
+    """The card's body: what the data are, how they were made, what they cover. ``layouts``: a dataset over
+    many layouts (``cfg.layout`` is then the first), which stores views."""
     total = sum(len(ep["actions"]) for ep in episodes)
     by_behaviour: dict[tuple[str, float], list[bool]] = {}
     for ep in episodes:
         m = ep["meta"]
         by_behaviour.setdefault((m["behaviour"], m["fail_prob"]), []).append(m["success"])
+    where = f"on layout `{cfg.layout.name}`" if not layouts else (
+        f"on {len(layouts)} generated layouts (`{layouts[0].name}` … `{layouts[-1].name}`; the first shown below, "
+        "all in `layout_texts` of meta/hnsdt.json)")
     lines = [
-        f"Exploration data for `{cfg.env_id}` on layout `{cfg.layout.name}`, written by hnsdt, a "
+        f"Exploration data for `{cfg.env_id}` {where}, written by hnsdt, a "
         "reproduction of *Hierarchical Neuro-Symbolic Decision "
         "Transformer* (NeSy 2025): a stochastic key–door grid world where each move fails (the agent stays) "
         "with probability `fail_prob`.", "",
@@ -63,7 +72,7 @@ def description(cfg, episodes: list[dict], provenance: dict) -> str:
         "- load offline: `LeRobotDataset(repo_id, root=<this folder>)`", "",
         "### Features", "", "| feature | meaning |", "|---|---|",
         *[f"| `{name}` | {meaning} |" for name, meaning in FEATURES
-          if name != "observation.image" or cfg.render], "",
+          if (name != "observation.image" or cfg.render) and (name not in VIEW_FEATURES or layouts)], "",
         "### Behaviours and their success rate", "",
         "`random`: uniform random actions (the paper's exploration); `noisy_planner`: the symbolic planner's "
         "shortest-path controllers with each action replaced by a random one with probability epsilon. "
@@ -86,11 +95,11 @@ def description(cfg, episodes: list[dict], provenance: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
-def card_arguments(cfg, episodes: list[dict], provenance: dict) -> dict:
+def card_arguments(cfg, episodes: list[dict], provenance: dict, layouts=None) -> dict:
     """``create_lerobot_dataset_card`` / ``push_to_hub`` arguments (kept in meta/hnsdt.json)."""
     env = cfg.env_id.split("/")[-1]
     return {"tags": ["hnsdt", "gridworld", "key-door", "neuro-symbolic", "decision-transformer", env],
-            "license": cfg.license, "dataset_description": description(cfg, episodes, provenance),
+            "license": cfg.license, "dataset_description": description(cfg, episodes, provenance, layouts),
             "paper": "Baheri and Alm, *Hierarchical Neuro-Symbolic Decision Transformer*, NeSy 2025",
             "citation_bibtex": BIBTEX}
 

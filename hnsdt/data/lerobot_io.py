@@ -17,6 +17,9 @@ move_subgoal        int64      (1,)    the paper's labelling: ψ id of the Move 
 move_subgoal.target int64      (2,)    that operator's target cell (a Move's destination)
 task                string             the sub-goal's readable name, e.g. ``GoTo(key a)``
 observation.image   video      (H,W,3) optional (``collect.render`` > 0): the grid as drawn by render_rgb
+observation.view    int64      (c,)    datasets over many layouts (``generalisation``): the (2r+1)² cells
+                                       around the agent, row-major, as codes of :mod:`hnsdt.envs.observation`
+layout_index        int64      (1,)    ... and which of the dataset's layouts the episode was played on
 ==================  =========  ======  ==================================================================
 
 Beside LeRobot's own files, ``meta/hnsdt.json`` records the environment (id, layout text, limits), the sub-goal
@@ -49,6 +52,7 @@ from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
 
 from hnsdt.data.card import data_md5, render_card  # noqa: E402
 from hnsdt.envs.layout import Layout  # noqa: E402
+from hnsdt.envs.observation import local_view  # noqa: E402
 from hnsdt.envs.render import render_rgb  # noqa: E402
 from hnsdt.fileio import atomic_dir  # noqa: E402
 
@@ -61,9 +65,14 @@ class DatasetError(RuntimeError):
     """A dataset that is missing, incomplete or not one of ours; the message says which file and why."""
 
 
-def dataset_features(layout: Layout, render_px: int = 0) -> dict:
+def dataset_features(layout: Layout, render_px: int = 0, view_radius: int = 0) -> dict:
     """The per-frame features; ``render_px`` > 0 adds the grid drawn at that many pixels per cell, stored as
-    video (what LeRobot's visualizers, the Hub's included, show)."""
+    video (what LeRobot's visualizers, the Hub's included, show); ``view_radius`` > 0 (datasets over many
+    layouts) adds the local view and the layout index."""
+    r = view_radius
+    view = {"observation.view": {"dtype": "int64", "shape": ((2 * r + 1) ** 2,),
+                                 "names": [f"cell{dr:+d}{dc:+d}" for dr in range(-r, r + 1) for dc in range(-r, r + 1)]},
+            "layout_index": {"dtype": "int64", "shape": (1,), "names": ["layout"]}} if r else {}
     image = {"observation.image": {"dtype": "video", "shape": (layout.shape[0] * render_px,
                                                                layout.shape[1] * render_px, 3),
                                    "names": ["height", "width", "channels"]}} if render_px else {}
@@ -77,7 +86,7 @@ def dataset_features(layout: Layout, render_px: int = 0) -> dict:
         "subgoal.target": {"dtype": "int64", "shape": (2,), "names": ["row", "col"]},
         "move_subgoal": {"dtype": "int64", "shape": (1,), "names": ["subgoal_id"]},
         "move_subgoal.target": {"dtype": "int64", "shape": (2,), "names": ["row", "col"]},
-    }
+    } | view
 
 
 @contextlib.contextmanager
@@ -96,17 +105,24 @@ def _skip_image_embedding(features: dict):
         _lerobot_writer.embed_images = original
 
 
-def write_dataset(root: str | Path, repo_id: str, layout: Layout, episodes: list[dict], fps: int,
-                  meta: dict, card: dict, progress: bool = False, render_px: int = 0) -> Path:
+def write_dataset(root: str | Path, repo_id: str, layout: Layout | list[Layout], episodes: list[dict], fps: int,
+                  meta: dict, card: dict, progress: bool = False, render_px: int = 0, view_radius: int = 0) -> Path:
     """Write ``episodes`` (dicts with states, actions, rewards, success, subgoal_ids, subgoal_targets, their
     ``move_`` twins and a ``meta`` row) as a LeRobot dataset at ``root``, its card made from ``card``
     (:func:`hnsdt.data.card.card_arguments`). Built in a temporary folder beside ``root`` and moved into
-    place only when complete, so a failure leaves no half-written dataset."""
+    place only when complete, so a failure leaves no half-written dataset. ``layout`` may be a list (episodes
+    then name theirs by ``layout_index``) with ``view_radius`` > 0: each frame also stores its local view."""
     from hnsdt.symbolic.subgoals import ID_TO_NAME
 
     root = Path(root)
-    features = dataset_features(layout, render_px)
+    layouts = list(layout) if isinstance(layout, (list, tuple)) else [layout]
+    if len(layouts) > 1 and not view_radius:
+        raise ValueError("a dataset over several layouts stores views: view_radius must be > 0")
+    layout = layouts[0]  # the state's names (every layout of a dataset has the same flags)
+    features = dataset_features(layout, render_px, view_radius)
     draw = (lambda state: render_rgb(layout, state, render_px)) if render_px else None
+    view = (lambda ep: local_view(layouts[ep["layout_index"]], ep["states"], view_radius).reshape(
+        len(ep["states"]), -1)) if view_radius else None
     with atomic_dir(root) as staging, _quiet_video_encoder():
         ds = LeRobotDataset.create(repo_id, fps=fps, features=features, root=staging, use_videos=bool(render_px))
         try:
@@ -115,7 +131,7 @@ def write_dataset(root: str | Path, repo_id: str, layout: Layout, episodes: list
             ds.meta.save_episode_tasks([ID_TO_NAME[i] for i in used])
             with _skip_image_embedding(features):
                 for ep in tqdm(episodes, desc=f"write {root.name}", unit="episode", disable=not progress):
-                    _add_episode(ds, ep, ID_TO_NAME, draw)
+                    _add_episode(ds, ep, ID_TO_NAME, draw, view)
                     ds.save_episode()
         finally:
             ds.finalize()
@@ -124,8 +140,9 @@ def write_dataset(root: str | Path, repo_id: str, layout: Layout, episodes: list
         rows = [dict(ep["meta"], episode_index=i) for i, ep in enumerate(episodes)]
         pd.DataFrame(rows).to_parquet(staging / EPISODES_TABLE, index=False)
         md5 = data_md5(staging)
+        texts = {"layout_texts": [lay.text for lay in layouts], "view_radius": view_radius} if view_radius else {}
         full_meta = dict(meta, format_version=FORMAT_VERSION, subgoal_vocabulary=ID_TO_NAME,
-                         layout_text=layout.text, state_names=layout.state_names, card=card, data_md5=md5)
+                         layout_text=layout.text, state_names=layout.state_names, card=card, data_md5=md5, **texts)
         (staging / HNSDT_META).write_text(json.dumps(full_meta, indent=2, sort_keys=True) + "\n")
         (staging / "README.md").write_text(render_card(card, info, repo_id, md5))
     return root
@@ -144,13 +161,16 @@ def _quiet_video_encoder():
         av.logging.set_level(level)
 
 
-def _add_episode(ds: LeRobotDataset, ep: dict, names: list[str], draw=None) -> None:
+def _add_episode(ds: LeRobotDataset, ep: dict, names: list[str], draw=None, view=None) -> None:
     states, actions, rewards = ep["states"], ep["actions"], ep["rewards"]
     T = len(actions)
+    views = view(ep) if view is not None else None
     for t in range(T):
         last = t == T - 1
         success = last and ep["success"]
         image = {"observation.image": draw(states[t])} if draw is not None else {}
+        if views is not None:
+            image |= {"observation.view": views[t], "layout_index": np.array([ep["layout_index"]], dtype=np.int64)}
         ds.add_frame(image | {
             "observation.state": states[t].astype(np.int64),
             "action": np.array([actions[t]], dtype=np.int64),

@@ -24,7 +24,33 @@ from hnsdt.envs.keydoor import check_env_params, observation_space_for
 from hnsdt.envs.layout import Layout, load_layout
 
 
-class KeyDoorVectorEnv(VectorEnv):
+class EpisodeClock:
+    """Each copy's step count and end flags, and the reward of a batched step: what every batched env keeps."""
+
+    def _start_clock(self, num_envs: int, max_steps: int) -> None:
+        self.max_steps = int(max_steps)
+        self.steps = np.zeros(num_envs, dtype=np.int64)
+        self.terminated = np.zeros(num_envs, dtype=bool)
+        self.truncated = np.zeros(num_envs, dtype=bool)
+
+    @property
+    def done(self) -> np.ndarray:
+        return self.terminated | self.truncated
+
+    def _restart(self, mask: np.ndarray) -> None:
+        self.steps[mask] = 0
+        self.terminated[mask] = False
+        self.truncated[mask] = False
+
+    def _tick(self, live: np.ndarray, success: np.ndarray) -> np.ndarray:
+        """Count the step of the ``live`` copies, end those that succeeded or ran out of steps; the rewards."""
+        self.steps[live] += 1
+        self.terminated |= success
+        self.truncated |= live & ~success & (self.steps >= self.max_steps)
+        return np.where(live, STEP_REWARD + GOAL_REWARD * success, 0.0)
+
+
+class KeyDoorVectorEnv(EpisodeClock, VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.DISABLED}
 
     def __init__(self, num_envs: int, layout: str | Layout = "keydoor_5x5", fail_prob: float | Any = 0.0,
@@ -38,7 +64,6 @@ class KeyDoorVectorEnv(VectorEnv):
         self.layout = lay = load_layout(layout)
         self.num_envs = int(num_envs)
         self.fail_prob = float(per_copy[0]) if np.ndim(fail_prob) == 0 else per_copy.copy()
-        self.max_steps = int(max_steps)
         self.single_observation_space = observation_space_for(lay)
         self.single_action_space = gym.spaces.Discrete(N_ACTIONS)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -46,13 +71,7 @@ class KeyDoorVectorEnv(VectorEnv):
         self.rules = Rules(lay)
         self.np_random, _ = seeding.np_random(None)
         self.state = self.rules.initial_states(self.num_envs)
-        self.steps = np.zeros(self.num_envs, dtype=np.int64)
-        self.terminated = np.zeros(self.num_envs, dtype=bool)
-        self.truncated = np.zeros(self.num_envs, dtype=bool)
-
-    @property
-    def done(self) -> np.ndarray:
-        return self.terminated | self.truncated
+        self._start_clock(self.num_envs, max_steps)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Reset all copies, or those in ``options["reset_mask"]``; ``options["states"]`` (one row per reset
@@ -73,9 +92,7 @@ class KeyDoorVectorEnv(VectorEnv):
                 raise ValueError("a reset state puts the agent in a wall")
             fresh = states
         self.state[mask] = fresh
-        self.steps[mask] = 0
-        self.terminated[mask] = False
-        self.truncated[mask] = False
+        self._restart(mask)
         return self.state.copy(), {}
 
     def step(self, actions):
@@ -86,9 +103,6 @@ class KeyDoorVectorEnv(VectorEnv):
         live = ~self.done
         s = self.state
         success, move_failed = self.rules.step(s, actions, u, self.fail_prob, live)
-        self.steps[live] += 1
-        reward = np.where(live, STEP_REWARD + GOAL_REWARD * success, 0.0)
-        self.terminated |= success
-        self.truncated |= live & ~success & (self.steps >= self.max_steps)
+        reward = self._tick(live, success)
         info = {"success": success, "move_failed": move_failed}
         return s.copy(), reward, self.terminated.copy(), self.truncated.copy(), info

@@ -530,7 +530,82 @@ def theorem_sections(params: dict, results: Path, summ: pd.DataFrame, episodes: 
     return context, data
 
 
-def write_report(params: dict, results: Path, out: Path, lock_path: str | Path = "dvc.lock") -> Path:
+SPLIT_LABELS = {"train": "training layouts", "heldout": "held-out layouts", "minigrid": "MiniGrid grids"}
+
+
+def generalisation_table(summ: pd.DataFrame) -> pd.DataFrame:
+    """Per method × split: success and steps / optimum averaged over the failure probabilities (each a mean
+    over seeds), their across-seed std averaged the same way."""
+    g = summ.groupby(["method", "split"], sort=False)
+    return g.agg(success=("success_mean", "mean"), success_std=("success_std", "mean"),
+                 steps_ratio=("steps_ratio_mean", "mean"), layouts=("layouts", "max"),
+                 seeds=("seeds", "max")).reset_index()
+
+
+def generalisation_figure(table: pd.DataFrame, path: Path) -> None:
+    """Bars per method, one per split: success (left) and steps / optimum of the successful episodes (right)."""
+    methods, splits = list(dict.fromkeys(table.method)), list(dict.fromkeys(table.split))
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.2))
+    width = 0.8 / len(splits)
+    x = np.arange(len(methods))
+    for k, split in enumerate(splits):
+        d = table[table.split == split].set_index("method").reindex(methods)
+        axes[0].bar(x + k * width, d.success, width, yerr=d.success_std.fillna(0), capsize=2,
+                    label=SPLIT_LABELS.get(split, split))
+        axes[1].bar(x + k * width, d.steps_ratio, width, label=SPLIT_LABELS.get(split, split))
+    for ax, title in zip(axes, ("success rate (mean over fail_probs)", "steps / optimal (successful episodes)")):
+        ax.set_xticks(x + width * (len(splits) - 1) / 2, [_label(m) for m in methods], rotation=25, ha="right",
+                      fontsize=8)
+        ax.set_title(title)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].set_ylim(0, 1.05)
+    axes[1].axhline(1.0, color="k", lw=0.8)
+    axes[0].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def generalisation_context(params: dict, results: Path, figure: Path) -> dict:
+    """The report's unseen-layout section: the figure, the table and per-fail_prob numbers."""
+    summ = pd.read_csv(results / "summary.csv")
+    layouts = pd.read_csv(results / "layouts.csv")
+    table = generalisation_table(summ)
+    generalisation_figure(table, figure)
+    splits = list(dict.fromkeys(table.split))
+    head = "| method | " + " | ".join(f"{SPLIT_LABELS.get(s, s)}: success | steps / opt" for s in splits)
+    lines = [head + " | held-out / training success |", "|---" * (2 * len(splits) + 2) + "|"]
+    for method in dict.fromkeys(table.method):
+        d = table[table.method == method].set_index("split")
+        cells = " | ".join(f"{_fmt(d.success.get(s))} ± {_fmt(d.success_std.get(s))} | {_fmt(d.steps_ratio.get(s), '.2f')}"
+                           for s in splits)
+        ratio = (d.success.get("heldout", np.nan) / d.success.get("train", np.nan)
+                 if d.success.get("train", 0) > 0 else np.nan)
+        lines.append(f"| {_label(method)} | {cells} | {_fmt(ratio, '.2f')} |")
+    fps = sorted(set(summ.fail_prob))
+    detail = ["| method | split | " + " | ".join(f"fail {f:g}" for f in fps) + " |", "|---|---|" + "---|" * len(fps)]
+    for (method, split), d in summ.groupby(["method", "split"], sort=False):
+        d = d.set_index("fail_prob")
+        detail.append(f"| {_label(method)} | {split} | " + " | ".join(
+            f"{_fmt(d.success_mean.get(f))} ({_fmt(d.steps_ratio_mean.get(f), '.2f')}×)" for f in fps) + " |")
+    g = params.get("generalisation", {})
+    counts = layouts.groupby("split", sort=False).layout.nunique()
+    def span(v: pd.Series) -> str:
+        return f"{v.min()}" if v.min() == v.max() else f"{v.min()}–{v.max()}"
+
+    sizes = {s: f"{span(d.rows)} × {span(d.cols)}" for s, d in layouts.groupby("split")}
+    return {"generalisation_table": "\n".join(lines), "generalisation_detail": "\n".join(detail),
+            "generalisation_family": g.get("family", "?"), "generalisation_train": g.get("train_layouts", "?"),
+            "generalisation_radius": g.get("view_radius", "?"),
+            "generalisation_splits": [f"{SPLIT_LABELS.get(s, s)}: {n} ({sizes[s]} cells)" for s, n in counts.items()],
+            "generalisation_seeds": int(summ.seeds.max()),
+            "generalisation_episodes": int(pd.read_csv(results / "episodes.csv").groupby(
+                ["method", "seed", "layout", "fail_prob"]).size().max())}
+
+
+def write_report(params: dict, results: Path, out: Path, lock_path: str | Path = "dvc.lock",
+                 generalisation: Path | None = None) -> Path:
+    """``generalisation``: the unseen-layout experiment's results folder (its section is left out without one)."""
     summary_path = results / "summary.csv"
     if not summary_path.is_file():
         raise FileNotFoundError(f"{summary_path}: no evaluation summary (run `dvc repro evaluate`)")
@@ -555,7 +630,14 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
         if has_optimum:
             regret_figure(summ, tmp / "figures" / "regret.png")
         outs = lock_outputs(lock_path)
-        inputs = {p: md5 for p, md5 in sorted(outs.items()) if p.startswith(("data/", "models/"))}
+        inputs = {p: md5 for p, md5 in sorted(outs.items())
+                  if p.startswith(("data/", "models/", "generalisation/dataset", "generalisation/models/"))}
+        unseen = {}
+        if generalisation is not None:
+            if not (generalisation / "summary.csv").is_file():
+                raise FileNotFoundError(f"{generalisation / 'summary.csv'}: no results of the unseen-layout "
+                                        "experiment (run `dvc repro evaluate_generalisation`)")
+            unseen = generalisation_context(params, generalisation, tmp / "figures" / "generalisation.png")
         envs, methods = sorted(set(summ.env)), sorted(set(summ.method))
         rev, digest = git_revision(), params_digest(params)
         recorded = episodes[episodes.rrd != ""]
@@ -575,7 +657,8 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
             paper_pure_dt=", ".join(_label(m) for m in paper_pure_dt),
             seeds_table=seed_lines(view), solved=f"{SOLVED:.0%}", bootstrap=f"{BOOTSTRAP:,}", usage=usage,
             numbers=_table(numbers), recorded=len(recorded),
-            example_episode=recorded.episode_id.iloc[0] if len(recorded) else "")
+            example_episode=recorded.episode_id.iloc[0] if len(recorded) else "",
+            generalisation=bool(unseen), **unseen)
         (tmp / "report.md").write_text(text)
         theorem_data = {**theorem_data, "claims": claim_rows} if claim_rows else theorem_data
         if paper_claim_rows and arms:

@@ -107,10 +107,6 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         self.register_buffer("causal_mask", nn.Transformer.generate_square_subsequent_mask(cfg.seq_len),
                              persistent=False)
 
-    def model_states(self, layout, obs):
-        """The state vectors this model reads, from the environment's observations (here: as they are)."""
-        return obs
-
     def embed_states(self, states: torch.Tensor) -> torch.Tensor:
         flags = states[..., 2:].float() if self.cfg.n_flags else states[..., :1].float() * 0
         return self.row_emb(states[..., 0]) + self.col_emb(states[..., 1]) + self.flag_proj(flags)

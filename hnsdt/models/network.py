@@ -20,3 +20,8 @@ class Network(nn.Module):
     def __init__(self, cfg):
         super().__init__()
         self.cfg = cfg
+
+    def model_states(self, layout, obs):
+        """The state vectors this model reads, from the environment's observations and the layout (here: the
+        observations as they are; the view networks of :mod:`hnsdt.models.view` add the grid around the agent)."""
+        return obs

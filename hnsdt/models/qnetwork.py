@@ -30,6 +30,19 @@ def mlp(n_in: int, hidden: int, n_layers: int) -> nn.Sequential:
     return nn.Sequential(*layers)
 
 
+class StateFeatures:
+    """The MLP input of both value networks (:mod:`hnsdt.models.view` swaps it for the view's)."""
+
+    cfg: object
+
+    @staticmethod
+    def n_inputs(cfg) -> int:
+        return cfg.grid_h + cfg.grid_w + cfg.n_flags
+
+    def features(self, states: torch.Tensor) -> torch.Tensor:
+        return encode_states(states, self.cfg.grid_h, self.cfg.grid_w)
+
+
 @dataclass
 class QNetworkConfig:
     n_flags: int
@@ -39,15 +52,15 @@ class QNetworkConfig:
     n_layers: int = 2
 
 
-class QNetwork(Network, arch="q_network", config=QNetworkConfig):
+class QNetwork(StateFeatures, Network, arch="q_network", config=QNetworkConfig):
     def __init__(self, cfg: QNetworkConfig):
         super().__init__(cfg)
-        self.body = mlp(cfg.grid_h + cfg.grid_w + cfg.n_flags, cfg.hidden, cfg.n_layers)
+        self.body = mlp(self.n_inputs(cfg), cfg.hidden, cfg.n_layers)
         self.head = nn.Linear(cfg.hidden, N_ACTIONS)
 
     def forward(self, states: torch.Tensor) -> torch.Tensor:
         """Q-values (B, 5)."""
-        return self.head(self.body(encode_states(states, self.cfg.grid_h, self.cfg.grid_w)))
+        return self.head(self.body(self.features(states)))
 
 
 @dataclass
@@ -60,19 +73,19 @@ class OptionCriticConfig:
     n_layers: int = 2
 
 
-class OptionCritic(Network, arch="option_critic", config=OptionCriticConfig):
+class OptionCritic(StateFeatures, Network, arch="option_critic", config=OptionCriticConfig):
     """Shared features; heads for Q_Ω(s, ω), the termination probabilities β_ω(s) and the intra-option
     policies π_ω(a | s) of every option (Bacon et al., 2017)."""
 
     def __init__(self, cfg: OptionCriticConfig):
         super().__init__(cfg)
-        self.body = mlp(cfg.grid_h + cfg.grid_w + cfg.n_flags, cfg.hidden, cfg.n_layers)
+        self.body = mlp(self.n_inputs(cfg), cfg.hidden, cfg.n_layers)
         self.q_head = nn.Linear(cfg.hidden, cfg.n_options)
         self.termination_head = nn.Linear(cfg.hidden, cfg.n_options)
         self.policy_head = nn.Linear(cfg.hidden, cfg.n_options * N_ACTIONS)
 
     def forward(self, states: torch.Tensor):
         """Q_Ω (B, K), β (B, K) in (0, 1), policy logits (B, K, 5)."""
-        x = self.body(encode_states(states, self.cfg.grid_h, self.cfg.grid_w))
+        x = self.body(self.features(states))
         logits = self.policy_head(x).view(-1, self.cfg.n_options, N_ACTIONS)
         return self.q_head(x), torch.sigmoid(self.termination_head(x)), logits

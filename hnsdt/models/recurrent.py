@@ -61,13 +61,15 @@ class RecurrentPolicy(Network, arch="recurrent", config=RecurrentConfig):
         else:
             self.action_head = nn.Linear(h, N_ACTIONS)
 
+    def embed_states(self, states: torch.Tensor) -> torch.Tensor:
+        flags = states[..., 2:].float() if self.cfg.n_flags else states[..., :1].float() * 0
+        return self.row_emb(states[..., 0]) + self.col_emb(states[..., 1]) + self.flag_proj(flags)
+
     def forward(self, states, prev_actions, subgoals=None, hidden=None):
         """states (B, T, d) int64, prev_actions (B, T) int64; ``subgoals`` (B, T) feeds the hierarchical action
         head (None: its own argmax). Returns action logits (B, T, 5), sub-goal logits (B, T, V) or None, and
         the recurrent state to continue from."""
-        flags = states[..., 2:].float() if self.cfg.n_flags else states[..., :1].float() * 0
-        x = (self.row_emb(states[..., 0]) + self.col_emb(states[..., 1]) + self.flag_proj(flags)
-             + self.prev_action_emb(prev_actions))
+        x = self.embed_states(states) + self.prev_action_emb(prev_actions)
         out, hidden = self.rnn(x, hidden)
         if not self.cfg.hierarchical:
             return self.action_head(out), None, hidden

@@ -51,7 +51,7 @@ def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bo
     ``on_epoch(epoch, step, model)``, if given, is called after each complete epoch and must not change the model
     or draw random numbers (budget studies copy it: the model after e epochs of a longer run is the model of
     an e-epoch run, as nothing here depends on the total). ``network``: the model class (a
-    :class:`DecisionTransformer` or a subclass of it, e.g. :class:`hnsdt.models.view_dt.ViewDecisionTransformer`)."""
+    :class:`DecisionTransformer` or a subclass of it, e.g. :class:`hnsdt.models.view.ViewDecisionTransformer`)."""
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     device = pick_device(cfg.device)
@@ -99,9 +99,10 @@ def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bo
 
 
 def train_decision_transformer(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bool = True,
-                               desc: str = "train") -> tuple[DecisionTransformer, list[dict], dict]:
+                               desc: str = "train", network: type = DecisionTransformer
+                               ) -> tuple[DecisionTransformer, list[dict], dict]:
     """The registry's trainer (:mod:`hnsdt.methods`): :func:`train_dt` and the data it used."""
-    model, curve = train_dt(frames, model_cfg, cfg, progress=progress, desc=desc)
+    model, curve = train_dt(frames, model_cfg, cfg, progress=progress, desc=desc, network=network)
     used = np.isin(frames.policy, list(cfg.behaviours)) if cfg.behaviours else np.ones(len(frames), bool)
     windows = len(window_ends(frames, model_cfg.condition, cfg.behaviours))
     usage = {"dataset_frames": int(used.sum()), "windows_seen": curve[-1]["windows_seen"],

@@ -29,9 +29,10 @@ class DQNConfig(OnlineConfig):
     train_every: int = 4  # env steps per gradient step
 
 
-def train_dqn(layout: Layout, max_steps: int, net_cfg: QNetworkConfig, cfg: DQNConfig, progress: bool = True,
-              desc: str = "train") -> tuple[QNetwork, list[dict], dict]:
-    run = start_run(layout, max_steps, QNetwork, net_cfg, cfg)
+def train_dqn(layout: Layout | list[Layout], max_steps: int, net_cfg: QNetworkConfig, cfg: DQNConfig,
+              progress: bool = True, desc: str = "train", network: type = QNetwork) -> tuple[QNetwork, list[dict], dict]:
+    """``layout``: one map, or a list to draw from at every reset (then ``network`` reads views)."""
+    run = start_run(layout, max_steps, network, net_cfg, cfg)
     rng, device, env, q, target = run.rng, run.device, run.env, run.net, run.target
     obs, buffer, stats = run.obs, run.buffer, run.stats
     steps, due, next_log, curve = 0, 0.0, cfg.log_every, []
@@ -86,4 +87,4 @@ class DQNAgent(OnlineAgent):
 
 def make_agent(model, meta: dict, layout, executor, epsilon: float = 0.0, seed: int = 0) -> DQNAgent:
     """The registry's agent factory (:mod:`hnsdt.methods`)."""
-    return DQNAgent(model, epsilon, seed)
+    return DQNAgent(model, epsilon, seed, layout)

@@ -34,10 +34,16 @@ class OnlineConfig:
     log_every: int = 2_000  # env steps between training-curve rows
 
 
-def training_env(layout: Layout, max_steps: int, num_envs: int, fail_probs) -> KeyDoorVectorEnv:
+def training_env(layout: Layout | list[Layout], max_steps: int, num_envs: int, fail_probs, view_radius: int = 0):
     """``num_envs`` copies whose failure probabilities cycle through ``fail_probs``, so one policy learns
-    the same mix of failure probabilities the offline methods see in the dataset."""
+    the same mix of failure probabilities the offline methods see in the dataset. A list of layouts (the
+    generalisation experiment) gives copies that each draw a layout of the list at every reset and observe
+    view states (:class:`~hnsdt.envs.pool.LayoutPoolVectorEnv`)."""
     per_copy = np.resize(np.asarray(fail_probs, dtype=np.float64), num_envs)
+    if isinstance(layout, (list, tuple)):
+        from hnsdt.envs.pool import LayoutPoolVectorEnv
+
+        return LayoutPoolVectorEnv(layout, num_envs, per_copy, max_steps, view_radius)
     return KeyDoorVectorEnv(num_envs, layout, per_copy, max_steps)
 
 
@@ -142,13 +148,13 @@ class OnlineRun:
                                  "gradient_steps": self.grad_steps}
 
 
-def start_run(layout: Layout, max_steps: int, network: type, net_cfg, cfg: OnlineConfig) -> OnlineRun:
+def start_run(layout: Layout | list[Layout], max_steps: int, network: type, net_cfg, cfg: OnlineConfig) -> OnlineRun:
     """Seed torch and numpy, build the training copies, the network (``network(net_cfg)``), its target
     copy, Adam, the first observations, the replay buffer and the episode statistics."""
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     device = torch.device(cfg.device)
-    env = training_env(layout, max_steps, cfg.num_envs, cfg.fail_probs)
+    env = training_env(layout, max_steps, cfg.num_envs, cfg.fail_probs, getattr(net_cfg, "view_radius", 0))
     net = network(net_cfg).to(device)
     target = copy.deepcopy(net)
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
@@ -161,13 +167,13 @@ class OnlineAgent:
     """Batched acting with a trained online learner: ``epsilon`` and a seeded generator for its randomness.
     Subclasses implement ``act``; ``reset`` starts a new batch of episodes."""
 
-    def __init__(self, model: torch.nn.Module, epsilon: float = 0.0, seed: int = 0):
-        self.model, self.epsilon = model, float(epsilon)
+    def __init__(self, model: torch.nn.Module, epsilon: float = 0.0, seed: int = 0, layout: Layout | None = None):
+        self.model, self.epsilon, self.layout = model, float(epsilon), layout  # (a view model reads the layout)
         self.rng = np.random.default_rng(seed)
         self.device = next(model.parameters()).device
 
     def states(self, obs: np.ndarray) -> torch.Tensor:
-        return torch.from_numpy(np.asarray(obs, np.int64)).to(self.device)
+        return torch.from_numpy(np.asarray(self.model.model_states(self.layout, obs), np.int64)).to(self.device)
 
     def reset(self, obs: np.ndarray) -> None:
         pass

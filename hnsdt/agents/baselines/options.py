@@ -52,9 +52,11 @@ def choose_options(q: torch.Tensor, epsilon: float, rng: np.random.Generator) ->
     return np.where(rng.random(len(greedy)) < epsilon, rng.integers(0, q.shape[1], len(greedy)), greedy)
 
 
-def train_options(layout: Layout, max_steps: int, net_cfg: OptionCriticConfig, cfg: OptionsConfig,
-                  progress: bool = True, desc: str = "train") -> tuple[OptionCritic, list[dict], dict]:
-    run = start_run(layout, max_steps, OptionCritic, net_cfg, cfg)
+def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: OptionCriticConfig, cfg: OptionsConfig,
+                  progress: bool = True, desc: str = "train", network: type = OptionCritic
+                  ) -> tuple[OptionCritic, list[dict], dict]:
+    """``layout``: one map, or a list to draw from at every reset (then ``network`` reads views)."""
+    run = start_run(layout, max_steps, network, net_cfg, cfg)
     rng, device, env, net, target = run.rng, run.device, run.env, run.net, run.target
     obs, buffer, stats = run.obs, run.buffer, run.stats
     rows = torch.arange(cfg.num_envs, device=device)
@@ -146,4 +148,4 @@ class OptionsAgent(OnlineAgent):
 
 def make_agent(model, meta: dict, layout, executor, epsilon: float = 0.0, seed: int = 0) -> OptionsAgent:
     """The registry's agent factory (:mod:`hnsdt.methods`)."""
-    return OptionsAgent(model, epsilon, seed)
+    return OptionsAgent(model, epsilon, seed, layout)

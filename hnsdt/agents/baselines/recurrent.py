@@ -53,7 +53,7 @@ def episode_batch(frames: Frames, starts: np.ndarray, lengths: np.ndarray) -> di
 
 
 def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTrainConfig, progress: bool = True,
-                    desc: str = "train") -> tuple[RecurrentPolicy, list[dict], dict]:
+                    desc: str = "train", network: type = RecurrentPolicy) -> tuple[RecurrentPolicy, list[dict], dict]:
     """Train from scratch; returns the model (eval mode), its curve and the data used."""
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
@@ -61,7 +61,7 @@ def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTr
     starts, lengths = training_episodes(frames, cfg.behaviours)
     if len(starts) == 0:
         raise ValueError(f"no training episodes from behaviours {list(cfg.behaviours) or 'any'} in the dataset")
-    model = RecurrentPolicy(model_cfg).to(device)
+    model = network(model_cfg).to(device)
     opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     per_epoch = int(np.ceil(len(starts) / cfg.batch_size))
     total = cfg.epochs * per_epoch if not cfg.max_steps else min(cfg.epochs * per_epoch, cfg.max_steps)
@@ -99,8 +99,8 @@ def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTr
 class RecurrentAgent:
     """Greedy actions of a recurrent controller; the hierarchical one also reports its chosen sub-goals."""
 
-    def __init__(self, model: RecurrentPolicy):
-        self.model = model
+    def __init__(self, model: RecurrentPolicy, layout=None):
+        self.model, self.layout = model, layout  # (a view model reads the layout around the agent)
         self.device = next(model.parameters()).device
 
     def reset(self, obs: np.ndarray) -> None:
@@ -108,7 +108,8 @@ class RecurrentAgent:
         self.prev = np.full(len(obs), START_ACTION, dtype=np.int64)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        states = torch.from_numpy(np.asarray(obs, np.int64)[:, None]).to(self.device)
+        states = torch.from_numpy(np.asarray(self.model.model_states(self.layout, obs), np.int64)[:, None])
+        states = states.to(self.device)
         prev = torch.from_numpy(self.prev[:, None]).to(self.device)
         with torch.no_grad():
             logits, sub_logits, self.hidden = self.model(states, prev, hidden=self.hidden)
@@ -127,4 +128,4 @@ class RecurrentAgent:
 
 def make_agent(model: RecurrentPolicy, meta: dict, layout, executor, epsilon: float = 0.0, seed: int = 0):
     """The registry's agent factory (:mod:`hnsdt.methods`)."""
-    return RecurrentAgent(model)
+    return RecurrentAgent(model, layout)

@@ -1,0 +1,300 @@
+"""The unseen-layout experiment: do the learned methods transfer to maps they were not trained on?
+
+Protocol (``generalisation`` in params.yaml; README, "Unseen layouts"):
+
+1. **Layouts** (:func:`layout_splits`): ``train`` = the family's generated layouts of seeds ``0..N-1``,
+   ``heldout`` = seeds from :data:`HELDOUT_SEED` on (never in training), ``minigrid`` = grids that the
+   ``minigrid`` package's own DoorKey generator makes, converted to our layouts (our dynamics, not MiniGrid's).
+   Every layout is checked usable (a plan exists, the exact optimum succeeds within ``max_steps``) first.
+2. **Collect** (:func:`collect`): noisy-planner episodes on every training layout (from its start and from random
+   states), one LeRobot dataset whose frames also store the local view (``observation.view``) and the layout.
+3. **Train** (:func:`plan_runs`): every method of ``generalisation.methods`` (decision transformers) and
+   ``generalisation.baselines`` with its registry entry's
+   ``view_network`` (the same model reading view states, :mod:`hnsdt.models.view`), the knobs of the paper's
+   protocol (``train`` and ``models.<family>`` for the transformers, ``baselines.<method>`` for the others);
+   offline methods on the dataset, online ones on copies that draw a training layout at every reset.
+4. **Evaluate** (:func:`evaluate`): every method × seed × layout × fail_prob, ``episodes`` each, and the
+   symbolic baseline as the reference; the exact optimum's expected steps per layout and fail_prob.
+   ``episodes.csv`` has one row per episode with its ``split`` and ``layout``; ``summary.csv`` the means.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from hnsdt.envs.layout import Layout
+from hnsdt.methods import METHODS, REFERENCE, resolve
+from hnsdt.methods import method as lookup_method
+
+SPLITS = ("train", "heldout", "minigrid")
+HELDOUT_SEED = 100_000  # held-out layouts are the family's seeds from here on
+
+
+@dataclass(frozen=True)
+class Source:
+    split: str
+    layout: Layout
+    max_steps: int
+
+    @property
+    def name(self) -> str:
+        return self.layout.name
+
+
+def settings(params: dict):
+    from hnsdt.config import _section
+
+    return _section(params, "generalisation")
+
+
+def layout_splits(params: dict, evaluated_only: bool = False) -> list[Source]:
+    """Every layout of the experiment, train first; ``evaluated_only`` keeps the evaluated training layouts only."""
+    from hnsdt.envs.generate import generate
+    from hnsdt.envs.minigrid_adapter import from_minigrid
+
+    g = settings(params)
+    n_train = g.evaluated_train_layouts if evaluated_only else g.train_layouts
+    out = [Source("train", generate(g.family, s), g.max_steps) for s in range(min(n_train, g.train_layouts))]
+    out += [Source("heldout", generate(g.family, HELDOUT_SEED + s), g.max_steps) for s in range(g.heldout_layouts)]
+    for src in g.minigrid:
+        out += [Source("minigrid", from_minigrid(src.id, s), src.max_steps) for s in range(src.layouts)]
+    return out
+
+
+def check_sources(sources: list[Source], fail_prob: float) -> None:
+    """Every layout usable at the highest failure probability, and all with the same flags (one network)."""
+    from hnsdt.envs.generate import check_usable
+
+    flags = {src.layout.n_flags for src in sources}
+    if len(flags) > 1:
+        raise ValueError(f"generalisation: the layouts have different flag counts {sorted(flags)} (a family and "
+                         "MiniGrid sources with other numbers of keys, doors or items cannot share one network)")
+    for src in sources:
+        check_usable(src.layout, src.max_steps, fail_prob)
+
+
+def collect_settings(params: dict):
+    """The collection of the training layouts' episodes: ``collect``'s seed, fps, licence and fail_probs, the
+    noisy planner of ``planner``, ``generalisation.episodes_per_layout`` per start."""
+    from hnsdt.config import _section, executor_config
+    from hnsdt.data.collect import Behaviour, CollectConfig
+
+    g, collect = settings(params), _section(params, "collect")
+    behaviours = [Behaviour("noisy_planner", g.episodes_per_layout, start, g.epsilon) for start in ("layout", "random")]
+    return CollectConfig(env_id=f"hnsdt/generated-{g.family}", layout=None, max_steps=g.max_steps,
+                         fail_probs=[float(f) for f in collect.fail_probs], behaviours=behaviours, seed=collect.seed,
+                         fps=collect.fps, executor=executor_config(params), license=collect.license)
+
+
+def collect(params: dict, root: str | Path, provenance: dict, progress: bool = True) -> Path:
+    """Collect on every training layout and write one LeRobot dataset with views (atomically)."""
+    from tqdm import tqdm
+
+    from hnsdt.data.card import card_arguments
+    from hnsdt.data.collect import _batch_seed, collect_episodes
+    from hnsdt.data.lerobot_io import write_dataset
+
+    g = settings(params)
+    base = collect_settings(params)
+    sources = layout_splits(params)
+    train = [s for s in sources if s.split == "train"]
+    check_sources(train, max(base.fail_probs))
+    episodes = []
+    for i, src in enumerate(tqdm(train, desc="collect generated layouts", unit="layout", disable=not progress)):
+        cfg = replace(base, layout=src.layout, seed=_batch_seed(base.seed, 1_000_003, i))
+        for ep in collect_episodes(cfg, progress=False):
+            ep["layout_index"] = i
+            ep["meta"]["layout_index"] = i
+            episodes.append(ep)
+    layouts = [s.layout for s in train]
+    cfg = replace(base, layout=layouts[0])
+    meta = {"repo_id": f"local/generated-{g.family}", "env_id": base.env_id, "family": g.family,
+            "layout": layouts[0].name, "layouts": [lay.name for lay in layouts], "max_steps": g.max_steps,
+            "fps": base.fps, "seed": base.seed, "fail_probs": list(base.fail_probs),
+            "behaviours": [vars(b) for b in base.behaviours], "executor": vars(base.executor)}
+    card = card_arguments(cfg, episodes, provenance, layouts)
+    return write_dataset(root, meta["repo_id"], layouts, episodes, base.fps, meta, card, progress=progress,
+                         view_radius=g.view_radius)
+
+
+def network_configs(params: dict, method: str, seed: int):
+    """``(view network config, training config, data kind)`` of one method and seed."""
+    from hnsdt.config import _fail, baseline_settings, train_settings, typed
+    from hnsdt.models.view import view_config
+
+    g = settings(params)
+    entry = lookup_method(method)
+    if not entry.view_network:
+        raise ValueError(f"generalisation: {method} has no network that reads views")
+    sources = layout_splits(params)
+    lay = sources[0].layout
+    env = {"layout": lay, "max_steps": g.max_steps, "id": f"hnsdt/generated-{g.family}"}
+    view_cls = resolve(entry.view_network).config_class
+    if entry.stage == "train":  # a decision transformer: `train` and `models.<family>`
+        ts, models = train_settings(params), typed(params).models
+        if g.family not in models:
+            raise _fail(params, f"missing key models.{g.family} (the decision transformers' size on the "
+                        f"generalisation family {g.family})")
+        max_offset = max(max(s.layout.shape) for s in sources) - 1  # targets relative to the agent
+        try:
+            cfg = view_config(entry.condition, lay.n_flags, g.view_radius, max_offset,
+                              max_timestep=max(s.max_steps for s in sources), dropout=typed(params).train.dropout,
+                              **models[g.family].model_dump())
+        except ValueError as e:
+            raise _fail(params, f"models.{g.family}: {e}") from None
+        train_cfg = replace(ts["config"], seed=seed, behaviours=ts["behaviours"][method], loss=ts["loss"][method])
+        return cfg, _budget(params, method, train_cfg)
+    bs = baseline_settings(params, method, g.family, seed, env=env)
+    return view_cls(**asdict(bs["model"]), view_radius=g.view_radius), _budget(params, method, bs["train"])
+
+
+def _budget(params: dict, method: str, train_cfg):
+    """``train_cfg`` with ``generalisation.budgets.<method>`` applied: each key a field of its training config,
+    with the field's type."""
+    import dataclasses
+
+    from hnsdt.config import _fail
+
+    budget = settings(params).budgets.get(method, {})
+    fields = {f.name for f in dataclasses.fields(train_cfg)} - {"seed", "device", "behaviours"}
+    values = {}
+    for key, value in budget.items():
+        if key not in fields:
+            raise _fail(params, f"generalisation.budgets.{method}: unknown key {key}; expected one of "
+                        f"{sorted(fields)}")
+        kind = type(getattr(train_cfg, key))
+        if kind is float and isinstance(value, int) and not isinstance(value, bool):
+            value = float(value)
+        if kind is tuple and isinstance(value, list):
+            value = tuple(value)
+        if type(value) is not kind:
+            raise _fail(params, f"generalisation.budgets.{method}.{key} must be {kind.__name__}, got {value!r}")
+        values[key] = value
+    return replace(train_cfg, **values)
+
+
+def plan_runs(params: dict, method: str, dataset: str | Path) -> list[tuple]:
+    """One task per seed, in the form :func:`hnsdt.training.train_run` runs."""
+    from hnsdt.data.windows import load_frames
+
+    g = settings(params)
+    if method not in g.learned:
+        raise ValueError(f"method {method!r} is not in generalisation.methods {list(g.methods)} or "
+                         f"generalisation.baselines {list(g.baselines)}")
+    online = lookup_method(method).training == "online"
+    if online:
+        data = ([s.layout for s in layout_splits(params) if s.split == "train"], g.max_steps)
+        facts = {"family": g.family, "train_layouts": g.train_layouts}
+    else:
+        from hnsdt.data.lerobot_io import check_dataset
+
+        radius = check_dataset(dataset).get("view_radius", 0)
+        if radius != g.view_radius:
+            raise ValueError(f"dataset {dataset}: view radius {radius} (0 = no observation.view), but "
+                             f"generalisation.view_radius is {g.view_radius}; collect it with "
+                             "`python pipeline/generalisation.py collect`")
+        data = load_frames(dataset)
+        facts = {"dataset": str(dataset), "family": g.family,
+                 "target_return": float(data.returns_to_go[np.unique(data.episode_start)].max())}
+    runs = []
+    for seed in g.seeds:
+        net_cfg, train_cfg = network_configs(params, method, seed)
+        runs.append((method, seed, net_cfg, train_cfg, data, facts))
+    return runs
+
+
+# -- evaluation -------------------------------------------------------------------------------------------
+
+@lru_cache(maxsize=None)
+def _optimum(layout: Layout, fail_prob: float, max_steps: int) -> tuple[float, float]:
+    from hnsdt.oracle import optimum
+
+    best = optimum(layout, fail_prob, max_steps)
+    return float(best.steps), float(best.success)
+
+
+def episode_seed(seed: int, layout_index: int) -> int:
+    """The environment seed of a layout for one seed: the same for every method."""
+    return int(np.random.SeedSequence([seed, layout_index, 7207]).generate_state(1)[0])
+
+
+def evaluate_run(method: str, seed: int, sources: list[Source], fail_probs: list[float], episodes: int,
+                 executor, model, meta: dict, epsilon: float) -> list[dict]:
+    """Every layout × fail_prob of one method and seed: one row per episode. A layout's episodes at every
+    failure probability run as one batch (copies with their own fail_prob): one agent call per step for all."""
+    from hnsdt.agents.rollout import rollout
+    from hnsdt.envs.vector import KeyDoorVectorEnv
+    from hnsdt.evaluation.evaluate import build_agent
+
+    per_copy = np.repeat(np.asarray(fail_probs, dtype=np.float64), episodes)
+    rows = []
+    for li, src in enumerate(sources):
+        env_seed = episode_seed(seed, li)
+        agent = build_agent(method, src.layout, executor, model, meta, epsilon, env_seed + 1)
+        eps = rollout(KeyDoorVectorEnv(len(per_copy), src.layout, per_copy, src.max_steps), agent, seed=env_seed)
+        for i, ep in enumerate(eps):
+            rows.append({"method": method, "seed": seed, "split": src.split, "layout": src.name,
+                         "fail_prob": float(per_copy[i]), "episode": i % episodes, "success": bool(ep.success),
+                         "steps": ep.length, "reward": round(ep.ret, 6)})
+    return rows
+
+
+def evaluate(params: dict, models_root: str | Path, out_dir: str | Path, compute=None,
+             progress: bool = True) -> pd.DataFrame:
+    """Run every method × seed on every evaluated layout; write ``episodes.csv`` and ``summary.csv``."""
+    from hnsdt.config import baseline_eval_epsilon, executor_config, fail_probs
+    from hnsdt.models.checkpoint import load_checkpoint
+    from hnsdt.executor import Compute, run_tasks
+    from hnsdt.fileio import atomic_dir
+
+    g = settings(params)
+    fps = fail_probs(params, "evaluate.fail_probs", params["evaluate"]["fail_probs"])
+    sources = layout_splits(params, evaluated_only=True)
+    check_sources(sources, max(fps))
+    executor = executor_config(params)
+    methods = [*g.learned, REFERENCE]
+    tasks = []
+    for method in methods:
+        for seed in g.seeds:
+            if method == REFERENCE:
+                model, meta, eps = None, {}, 0.0
+            else:
+                path = Path(models_root) / method / f"seed{seed}"
+                model, meta = load_checkpoint(path)
+                if meta.get("arch") != resolve(METHODS[method].view_network).arch:
+                    raise ValueError(f"{path} is not a view model (train it with `python pipeline/generalisation.py "
+                                     f"train --method {method}`)")
+                eps = baseline_eval_epsilon(params, method) if METHODS[method].training == "online" else 0.0
+            tasks.append((method, seed, sources, fps, g.episodes, executor, model, meta, eps))
+    results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
+    table = pd.DataFrame([row for rows in results for row in rows])
+    optimal = {(s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fps}
+    table["optimal_steps"] = [optimal[(n, fp)][0] for n, fp in zip(table["layout"], table["fail_prob"])]
+    with atomic_dir(Path(out_dir)) as tmp:
+        tmp.mkdir()
+        table.to_csv(tmp / "episodes.csv", index=False, float_format="%.6g")
+        summary(table).to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
+        layouts = pd.DataFrame([{"split": s.split, "layout": s.name, "rows": s.layout.shape[0],
+                                 "cols": s.layout.shape[1], "max_steps": s.max_steps} for s in sources])
+        layouts.to_csv(tmp / "layouts.csv", index=False)
+    return table
+
+
+def summary(table: pd.DataFrame) -> pd.DataFrame:
+    """Per method × split × fail_prob: success and steps / optimum (successful episodes), mean and std over
+    seeds; each seed's values are means over its layouts' episodes."""
+    t = table.assign(ratio=np.where(table["success"], table["steps"] / table["optimal_steps"], np.nan))
+    per_seed = t.groupby(["method", "split", "fail_prob", "seed"], sort=False).agg(
+        success=("success", "mean"), steps_ratio=("ratio", "mean")).reset_index()
+    out = per_seed.groupby(["method", "split", "fail_prob"], sort=False).agg(
+        success_mean=("success", "mean"), success_std=("success", "std"),
+        steps_ratio_mean=("steps_ratio", "mean"), steps_ratio_std=("steps_ratio", "std"),
+        seeds=("seed", "nunique")).reset_index()
+    layouts = table.groupby("split")["layout"].nunique()
+    out["layouts"] = out["split"].map(layouts)
+    return out

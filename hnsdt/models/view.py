@@ -1,0 +1,162 @@
+"""The learned methods' networks on observations that show the world, for layouts they have not seen.
+
+Each class here is its method's network (:mod:`hnsdt.models.dt`, :mod:`hnsdt.models.recurrent`,
+:mod:`hnsdt.models.qnetwork`) with the state input changed so that nothing it reads is tied to one map:
+
+* a step's state is the local view around the agent (:func:`hnsdt.envs.observation.local_view`, cell codes by
+  identity: wall, floor, exit, key / door / item by letter, door open or closed) and the flags, never the
+  absolute ``(row, col)``;
+* the decision transformer's sub-goal token carries the operator's target *relative to the agent's current
+  cell* (``target − (row, col)`` of the window's last step), not its absolute cell.
+
+State vectors are ``row, col, view codes (row-major), flags`` (:func:`view_states`): the datasets' own
+``observation.state`` and ``observation.view`` side by side. Row and column are kept only to make the targets
+relative, and never embedded. The registry names these classes as each method's ``view_network``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+import torch.nn as nn
+import torch.nn.functional as F
+
+from hnsdt.envs.layout import Layout
+from hnsdt.envs.observation import N_CODES, local_view
+from hnsdt.models.dt import DecisionTransformer, DTConfig
+from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig, QNetwork, QNetworkConfig
+from hnsdt.models.recurrent import RecurrentConfig, RecurrentPolicy
+
+
+def view_states(layout: Layout, states: np.ndarray, radius: int) -> np.ndarray:
+    """``row, col, view codes, flags`` per state: what every network of this module reads."""
+    states = np.asarray(states, dtype=np.int64).reshape(-1, 2 + layout.n_flags)
+    views = local_view(layout, states, radius).reshape(len(states), -1)
+    return np.concatenate([states[:, :2], views, states[:, 2:]], axis=1)
+
+
+def split_states(states: torch.Tensor, radius: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(codes (…, cells) int64, flags (…, n_flags) float)`` of view state vectors."""
+    cells = (2 * radius + 1) ** 2
+    return states[..., 2:2 + cells], states[..., 2 + cells:].float()
+
+
+class ViewEncoder(nn.Module):
+    """A learned embedding of each cell's code, the window's embeddings flattened and projected, plus a linear
+    map of the flags: one ``width``-vector per state."""
+
+    def __init__(self, radius: int, code_dim: int, n_flags: int, width: int):
+        super().__init__()
+        self.radius = radius
+        self.code_emb = nn.Embedding(N_CODES, code_dim)
+        self.view_proj = nn.Linear((2 * radius + 1) ** 2 * code_dim, width)
+        self.flag_proj = nn.Linear(max(n_flags, 1), width, bias=False)
+
+    def forward(self, states: torch.Tensor) -> torch.Tensor:
+        codes, flags = split_states(states, self.radius)
+        if flags.shape[-1] == 0:
+            flags = torch.zeros(*flags.shape[:-1], 1, device=flags.device)
+        return self.view_proj(self.code_emb(codes).flatten(-2)) + self.flag_proj(flags)
+
+
+class ViewModel:
+    """What every view network adds to its base: it reads view states made from the environment's
+    observations and the layout."""
+
+    cfg: object
+
+    def model_states(self, layout: Layout, obs: np.ndarray) -> np.ndarray:
+        return view_states(layout, obs, self.cfg.view_radius)
+
+
+# -- decision transformer (HNSDT, pure DT) ---------------------------------------------------------------
+
+@dataclass
+class ViewDTConfig(DTConfig):
+    """``grid_h`` / ``grid_w`` are the target-offset vocabularies: offsets ``-max_offset..max_offset`` with
+    ``grid_h = grid_w = 2 * max_offset + 1`` (:func:`view_config`)."""
+
+    view_radius: int = 2
+    code_dim: int = 16  # embedding width of one cell code
+
+    @property
+    def max_offset(self) -> int:
+        return (self.grid_h - 1) // 2
+
+
+def view_config(condition: str, n_flags: int, view_radius: int, max_offset: int, **sizes) -> ViewDTConfig:
+    side = 2 * max_offset + 1
+    return ViewDTConfig(condition=condition, n_flags=n_flags, grid_h=side, grid_w=side, view_radius=view_radius,
+                        **sizes)
+
+
+class ViewDecisionTransformer(ViewModel, DecisionTransformer, arch="view_decision_transformer",
+                              config=ViewDTConfig):
+    def __init__(self, cfg: ViewDTConfig):
+        super().__init__(cfg)
+        del self.row_emb, self.col_emb, self.flag_proj  # absolute positions are never read
+        self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, cfg.d_model)
+
+    def embed_states(self, states: torch.Tensor) -> torch.Tensor:
+        return self.view(states)
+
+    def forward(self, states, actions, timesteps, pad, subgoal_ids=None, subgoal_targets=None, returns=None):
+        if subgoal_targets is not None:  # absolute target -> offset from the agent's current cell (-1: none)
+            m = self.cfg.max_offset
+            rel = (subgoal_targets - states[:, -1, :2]).clamp(-m, m) + m
+            subgoal_targets = torch.where(subgoal_targets < 0, -1, rel)
+        return super().forward(states, actions, timesteps, pad, subgoal_ids, subgoal_targets, returns)
+
+
+# -- recurrent controllers (LSTM hierarchical, GRU) -------------------------------------------------------
+
+@dataclass
+class ViewRecurrentConfig(RecurrentConfig):
+    view_radius: int = 2
+    code_dim: int = 16
+
+
+class ViewRecurrentPolicy(ViewModel, RecurrentPolicy, arch="view_recurrent", config=ViewRecurrentConfig):
+    def __init__(self, cfg: ViewRecurrentConfig):
+        super().__init__(cfg)
+        del self.row_emb, self.col_emb, self.flag_proj
+        self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, cfg.embed)
+
+    def embed_states(self, states: torch.Tensor) -> torch.Tensor:
+        return self.view(states)
+
+
+# -- value networks (DQN, option-critic): one-hot codes and flags into the MLP ---------------------------
+
+def one_hot_view(states: torch.Tensor, radius: int) -> torch.Tensor:
+    """(…, 2 + cells + flags) int64 → (…, cells · N_CODES + flags) float."""
+    codes, flags = split_states(states, radius)
+    return torch.cat([F.one_hot(codes, N_CODES).float().flatten(-2), flags], dim=-1)
+
+
+@dataclass
+class ViewQNetworkConfig(QNetworkConfig):
+    view_radius: int = 2
+
+
+class ViewQNetwork(ViewModel, QNetwork, arch="view_q_network", config=ViewQNetworkConfig):
+    @staticmethod
+    def n_inputs(cfg) -> int:
+        return (2 * cfg.view_radius + 1) ** 2 * N_CODES + cfg.n_flags
+
+    def features(self, states: torch.Tensor) -> torch.Tensor:
+        return one_hot_view(states, self.cfg.view_radius)
+
+
+@dataclass
+class ViewOptionCriticConfig(OptionCriticConfig):
+    view_radius: int = 2
+
+
+class ViewOptionCritic(ViewModel, OptionCritic, arch="view_option_critic", config=ViewOptionCriticConfig):
+    n_inputs = staticmethod(ViewQNetwork.n_inputs)
+
+    def features(self, states: torch.Tensor) -> torch.Tensor:
+        return one_hot_view(states, self.cfg.view_radius)
