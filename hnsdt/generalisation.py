@@ -123,7 +123,7 @@ def collect(params: dict, root: str | Path, provenance: dict, progress: bool = T
 
 
 def network_configs(params: dict, method: str, seed: int):
-    """``(view network config, training config, data kind)`` of one method and seed."""
+    """``(view network config, training config)`` of one method and seed."""
     from hnsdt.config import _fail, baseline_settings, train_settings, typed
     from hnsdt.models.view import view_config
 
