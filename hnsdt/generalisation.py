@@ -31,7 +31,6 @@ from hnsdt.envs.layout import Layout
 from hnsdt.methods import METHODS, REFERENCE, resolve
 from hnsdt.methods import method as lookup_method
 
-SPLITS = ("train", "heldout", "minigrid")
 HELDOUT_SEED = 100_000  # held-out layouts are the family's seeds from here on
 
 
@@ -52,14 +51,21 @@ def settings(params: dict):
     return _section(params, "generalisation")
 
 
+def training_layouts(params: dict) -> list[Source]:
+    """The training layouts: the family's seeds ``0..train_layouts-1``."""
+    from hnsdt.envs.generate import generate
+
+    g = settings(params)
+    return [Source("train", generate(g.family, s), g.max_steps) for s in range(g.train_layouts)]
+
+
 def layout_splits(params: dict, evaluated_only: bool = False) -> list[Source]:
     """Every layout of the experiment, train first; ``evaluated_only`` keeps the evaluated training layouts only."""
     from hnsdt.envs.generate import generate
     from hnsdt.envs.minigrid_adapter import from_minigrid
 
     g = settings(params)
-    n_train = g.evaluated_train_layouts if evaluated_only else g.train_layouts
-    out = [Source("train", generate(g.family, s), g.max_steps) for s in range(min(n_train, g.train_layouts))]
+    out = training_layouts(params)[:g.evaluated_train_layouts] if evaluated_only else training_layouts(params)
     out += [Source("heldout", generate(g.family, HELDOUT_SEED + s), g.max_steps) for s in range(g.heldout_layouts)]
     for src in g.minigrid:
         out += [Source("minigrid", from_minigrid(src.id, s), src.max_steps) for s in range(src.layouts)]
@@ -101,8 +107,7 @@ def collect(params: dict, root: str | Path, provenance: dict, progress: bool = T
 
     g = settings(params)
     base = collect_settings(params)
-    sources = layout_splits(params)
-    train = [s for s in sources if s.split == "train"]
+    train = training_layouts(params)
     check_sources(train, max(base.fail_probs))
     episodes = []
     for i, src in enumerate(tqdm(train, desc="collect generated layouts", unit="layout", disable=not progress)):
@@ -123,7 +128,8 @@ def collect(params: dict, root: str | Path, provenance: dict, progress: bool = T
 
 
 def network_configs(params: dict, method: str, seed: int):
-    """``(view network config, training config)`` of one method and seed."""
+    """``(view network config, training config)`` of one method and seed. The network is sized for every layout
+    of the experiment (the largest target offset, the longest episode)."""
     from hnsdt.config import _fail, baseline_settings, train_settings, typed
     from hnsdt.models.view import view_config
 
@@ -156,26 +162,15 @@ def network_configs(params: dict, method: str, seed: int):
 def _budget(params: dict, method: str, train_cfg):
     """``train_cfg`` with ``generalisation.budgets.<method>`` applied: each key a field of its training config,
     with the field's type."""
-    import dataclasses
+    from hnsdt.config import _fail, _fill
 
-    from hnsdt.config import _fail
-
-    budget = settings(params).budgets.get(method, {})
-    fields = {f.name for f in dataclasses.fields(train_cfg)} - {"seed", "device", "behaviours"}
-    values = {}
-    for key, value in budget.items():
-        if key not in fields:
-            raise _fail(params, f"generalisation.budgets.{method}: unknown key {key}; expected one of "
-                        f"{sorted(fields)}")
-        kind = type(getattr(train_cfg, key))
-        if kind is float and isinstance(value, int) and not isinstance(value, bool):
-            value = float(value)
-        if kind is tuple and isinstance(value, list):
-            value = tuple(value)
-        if type(value) is not kind:
-            raise _fail(params, f"generalisation.budgets.{method}.{key} must be {kind.__name__}, got {value!r}")
-        values[key] = value
-    return replace(train_cfg, **values)
+    key, budget = f"generalisation.budgets.{method}", settings(params).budgets.get(method, {})
+    allowed = set(vars(train_cfg)) - {"seed", "device", "behaviours"}
+    unknown = sorted(set(budget) - allowed)
+    if unknown:
+        raise _fail(params, f"{key}: unknown key {unknown[0]}; expected one of {sorted(allowed)}")
+    fixed = {k: v for k, v in vars(train_cfg).items() if k not in budget}
+    return _fill(params, key, type(train_cfg), budget, **fixed)  # (types checked as for baselines.<method>)
 
 
 def plan_runs(params: dict, method: str, dataset: str | Path) -> list[tuple]:
@@ -188,7 +183,7 @@ def plan_runs(params: dict, method: str, dataset: str | Path) -> list[tuple]:
                          f"generalisation.baselines {list(g.baselines)}")
     online = lookup_method(method).training == "online"
     if online:
-        data = ([s.layout for s in layout_splits(params) if s.split == "train"], g.max_steps)
+        data = ([s.layout for s in training_layouts(params)], g.max_steps)
         facts = {"family": g.family, "train_layouts": g.train_layouts}
     else:
         from hnsdt.data.lerobot_io import check_dataset
@@ -201,11 +196,8 @@ def plan_runs(params: dict, method: str, dataset: str | Path) -> list[tuple]:
         data = load_frames(dataset)
         facts = {"dataset": str(dataset), "family": g.family,
                  "target_return": float(data.returns_to_go[np.unique(data.episode_start)].max())}
-    runs = []
-    for seed in g.seeds:
-        net_cfg, train_cfg = network_configs(params, method, seed)
-        runs.append((method, seed, net_cfg, train_cfg, data, facts))
-    return runs
+    net_cfg, train_cfg = network_configs(params, method, g.seeds[0])  # (the layouts are generated once)
+    return [(method, seed, net_cfg, replace(train_cfg, seed=seed), data, facts) for seed in g.seeds]
 
 
 # -- evaluation -------------------------------------------------------------------------------------------

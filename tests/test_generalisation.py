@@ -195,7 +195,7 @@ def test_hnsdt_with_the_view_dt_trains_on_some_layouts_and_runs_on_others():
 
 # -- the protocol: every learned method on views, the layout pool, the dataset, the stages' functions --------
 
-def _tiny_generalisation_params(tmp_path=None) -> dict:
+def _tiny_generalisation_params(tmp_path) -> dict:
     """The repository's params with a tiny unseen-layout experiment (as the pipeline test's tiny repo)."""
     import sys
     from pathlib import Path
@@ -205,7 +205,7 @@ def _tiny_generalisation_params(tmp_path=None) -> dict:
     sys.path.insert(0, str(Path(__file__).parent))
     from tiny_repo import REPO, tiny_params
 
-    path = (tmp_path or Path(__import__("tempfile").mkdtemp())) / "params.yaml"
+    path = tmp_path / "params.yaml"
     path.write_text((REPO / "params.yaml").read_text())
     tiny_params(path)
     params = yaml.safe_load(path.read_text())
@@ -345,10 +345,10 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
         gen.plan_runs(params, "options", dataset)
 
 
-def test_a_bad_generalisation_knob_is_one_line_naming_it():
+def test_a_bad_generalisation_knob_is_one_line_naming_it(tmp_path):
     from hnsdt.params import validate
 
-    params = _tiny_generalisation_params()
+    params = _tiny_generalisation_params(tmp_path)
     params["generalisation"]["family"] = "maze"
     with pytest.raises(ValueError, match=r"^params: generalisation.family: Input should be 'keydoor' or"):
         validate(params)
@@ -357,11 +357,11 @@ def test_a_bad_generalisation_knob_is_one_line_naming_it():
         validate(params)
 
 
-def test_a_methods_budget_replaces_the_protocols_knobs_and_a_bad_one_is_named():
+def test_a_methods_budget_replaces_the_protocols_knobs_and_a_bad_one_is_named(tmp_path):
     from hnsdt import generalisation as gen
     from hnsdt.config import ParamsError
 
-    params = _tiny_generalisation_params()
+    params = _tiny_generalisation_params(tmp_path)
     params["generalisation"]["budgets"] = {"gru": {"epochs": 3, "lr": 1}, "dqn": {"env_steps": 123}}
     _, train_cfg = gen.network_configs(params, "gru", 0)
     assert (train_cfg.epochs, train_cfg.lr) == (3, 1.0)

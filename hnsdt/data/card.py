@@ -41,8 +41,9 @@ FEATURES = [  # (feature, meaning); dtypes and shapes come from meta/info.json o
     ("observation.image", "the grid drawn at this step (walls, keys, doors open or closed, items, exit, the agent "
                           "as a disc), as video; only with `collect.render` > 0"),
     ("observation.view", "the (2r+1)×(2r+1) cells around the agent, row-major, as codes: 0 outside the map, 1 wall, "
-                         "2 floor, 3 exit, 4 the agent, 5+k key k (a = 0), 15+k closed door, 25+k open door, 35+k "
-                         "item k (`hnsdt.envs.observation`); a key or item the agent holds is no longer drawn"),
+                         "2 floor, 3 exit, 5+k key k (a = 0), 15+k closed door, 25+k open door, 35+k item k "
+                         "(`hnsdt.envs.observation`); the centre shows what lies under the agent, a key or item "
+                         "the agent holds is no longer drawn"),
     ("layout_index", "which of the dataset's layouts the episode was played on (`layout_texts` in meta/hnsdt.json)"),
 ]
 VIEW_FEATURES = ("observation.view", "layout_index")

@@ -77,6 +77,14 @@ def local_view(layout: Layout, states: np.ndarray, radius: int) -> np.ndarray:
     return padded[np.arange(n)[:, None, None], rows[:, :, None], cols[:, None, :]]
 
 
+def view_states(layout: Layout, states: np.ndarray, radius: int) -> np.ndarray:
+    """``row, col, view codes (row-major), flags`` per state: what a learner on unseen layouts reads
+    (:mod:`hnsdt.models.view`), and what a dataset over many layouts stores beside ``observation.state``."""
+    states = np.asarray(states, dtype=np.int64).reshape(-1, 2 + layout.n_flags)
+    views = local_view(layout, states, radius).reshape(len(states), -1)
+    return np.concatenate([states[:, :2], views, states[:, 2:]], axis=1)
+
+
 def full_view(layout: Layout, states: np.ndarray) -> np.ndarray:
     """(N, H, W) codes of the whole grid with the agent's cell marked ``AGENT``."""
     states = np.asarray(states, dtype=np.int64).reshape(-1, 2 + layout.n_flags)

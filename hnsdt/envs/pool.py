@@ -3,7 +3,7 @@ experiment: whenever a copy resets it draws a new layout (seeded), so one policy
 
 The interface is :class:`~hnsdt.envs.vector.KeyDoorVectorEnv`'s (batched ``reset`` with ``reset_mask``,
 ``step``, no autoreset), through the same rules (:mod:`hnsdt.envs.dynamics`), but the observations are view
-states (``row, col, view codes, flags``, :func:`hnsdt.models.view.view_states`): each copy's own map around
+states (``row, col, view codes, flags``, :func:`hnsdt.envs.observation.view_states`): each copy's own map around
 its agent, so that rows of different layouts mean the same thing. Every layout must have the same flags.
 """
 
@@ -17,7 +17,7 @@ from gymnasium.utils import seeding
 from hnsdt.envs.dynamics import Rules
 from hnsdt.envs.keydoor import check_env_params
 from hnsdt.envs.layout import Layout
-from hnsdt.envs.observation import local_view
+from hnsdt.envs.observation import view_states
 from hnsdt.envs.vector import EpisodeClock
 
 
@@ -39,12 +39,17 @@ class LayoutPoolVectorEnv(EpisodeClock):
         self.state = np.zeros((self.num_envs, 2 + flags.pop()), dtype=np.int64)
         self._start_clock(self.num_envs, max_steps)
 
+    def _by_layout(self, mask: np.ndarray):
+        """``(layout index, boolean rows)`` for each layout that copies in ``mask`` play."""
+        for w in np.unique(self.which[mask]):
+            yield w, mask & (self.which == w)
+
     def observations(self) -> np.ndarray:
-        rows = []
-        for i in range(self.num_envs):
-            lay, s = self.layouts[self.which[i]], self.state[i:i + 1]
-            rows.append(np.concatenate([s[:, :2], local_view(lay, s, self.view_radius).reshape(1, -1), s[:, 2:]], 1))
-        return np.concatenate(rows)
+        cells = (2 * self.view_radius + 1) ** 2
+        out = np.empty((self.num_envs, self.state.shape[1] + cells), dtype=np.int64)
+        for w, rows in self._by_layout(np.ones(self.num_envs, bool)):
+            out[rows] = view_states(self.layouts[w], self.state[rows], self.view_radius)
+        return out
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Reset every copy, or those in ``options["reset_mask"]``, each on a layout drawn from the pool."""
@@ -63,9 +68,9 @@ class LayoutPoolVectorEnv(EpisodeClock):
         u = self.np_random.random(self.num_envs)
         live = ~self.done
         success = np.zeros(self.num_envs, dtype=bool)
-        for i in np.flatnonzero(live):
-            ok, _ = self.rules[self.which[i]].step(self.state[i:i + 1], actions[i:i + 1], u[i:i + 1],
-                                                   self.fail_prob[i:i + 1], live[i:i + 1])
-            success[i] = ok[0]
+        for w, rows in self._by_layout(live):  # the rules act row by row: one call per layout in play
+            s = self.state[rows]
+            success[rows], _ = self.rules[w].step(s, actions[rows], u[rows], self.fail_prob[rows], live[rows])
+            self.state[rows] = s
         reward = self._tick(live, success)
         return self.observations(), reward, self.terminated.copy(), self.truncated.copy(), {"success": success}

@@ -9,9 +9,8 @@ Each class here is its method's network (:mod:`hnsdt.models.dt`, :mod:`hnsdt.mod
 * the decision transformer's sub-goal token carries the operator's target *relative to the agent's current
   cell* (``target − (row, col)`` of the window's last step), not its absolute cell.
 
-State vectors are ``row, col, view codes (row-major), flags`` (:func:`view_states`): the datasets' own
-``observation.state`` and ``observation.view`` side by side. Row and column are kept only to make the targets
-relative, and never embedded. The registry names these classes as each method's ``view_network``.
+State vectors are ``row, col, view codes (row-major), flags`` (:func:`hnsdt.envs.observation.view_states`): the
+datasets' own ``observation.state`` and ``observation.view`` side by side. Row and column are kept only to make the targets relative, and never embedded. The registry names these classes as each method's ``view_network``.
 """
 
 from __future__ import annotations
@@ -24,17 +23,10 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from hnsdt.envs.layout import Layout
-from hnsdt.envs.observation import N_CODES, local_view
+from hnsdt.envs.observation import N_CODES, view_states
 from hnsdt.models.dt import DecisionTransformer, DTConfig
 from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig, QNetwork, QNetworkConfig
 from hnsdt.models.recurrent import RecurrentConfig, RecurrentPolicy
-
-
-def view_states(layout: Layout, states: np.ndarray, radius: int) -> np.ndarray:
-    """``row, col, view codes, flags`` per state: what every network of this module reads."""
-    states = np.asarray(states, dtype=np.int64).reshape(-1, 2 + layout.n_flags)
-    views = local_view(layout, states, radius).reshape(len(states), -1)
-    return np.concatenate([states[:, :2], views, states[:, 2:]], axis=1)
 
 
 def split_states(states: torch.Tensor, radius: int) -> tuple[torch.Tensor, torch.Tensor]:
