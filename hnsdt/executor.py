@@ -4,7 +4,9 @@ A stage hands over independent tasks (one training seed; one method × env × se
 module-level function with its arguments, data included, that returns a picklable result and touches no
 file. The caller writes every output. Each task sets its own torch thread count (``compute.threads``) and
 results come back in task order, so the outputs are the same bytes whichever executor runs the tasks and
-however many workers share them (tested).
+however many workers share them (tested). A task may also return :class:`Continue` — the rest of its work
+as new arguments — which goes to the back of the queue: a training seed hands back its state half-way, so
+that 5 seeds on 2 workers take 2.5 seed-times instead of 3.
 
 * ``local`` (default): a pool of ``workers`` spawned processes (0 = one per core / threads); one worker runs
   the tasks in this process.
@@ -39,6 +41,14 @@ class Compute:
         return max(1, min(n_tasks, self.workers or cores // self.threads))
 
 
+@dataclass(frozen=True)
+class Continue:
+    """What a task returns when it has more to do: ``fn(*args)`` is queued behind the waiting tasks, and its
+    result (or further :class:`Continue`) stands for the task's."""
+
+    args: tuple
+
+
 def _call(fn: Callable, threads: int, args: tuple) -> Any:
     import torch
 
@@ -60,18 +70,30 @@ def run_tasks(fn: Callable, tasks: list[tuple], compute: Compute = Compute(), de
         if workers == 1:
             out = []
             for args in tasks:
-                out.append(_call(fn, compute.threads, args))
+                result = _call(fn, compute.threads, args)
+                while isinstance(result, Continue):
+                    result = _call(fn, compute.threads, result.args)
+                out.append(result)
                 bar.update(1)
             return out
         import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
+        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
         # spawn, not fork: a forked child would inherit torch's thread pools from this process.
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            futures = [pool.submit(_call, fn, compute.threads, args) for args in tasks]
-            for f in futures:
-                f.add_done_callback(lambda _: bar.update(1))
-            return [f.result() for f in futures]
+            running = {pool.submit(_call, fn, compute.threads, args): i for i, args in enumerate(tasks)}
+            out = [None] * len(tasks)
+            while running:
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                for future in sorted(done, key=running.get):
+                    i = running.pop(future)
+                    result = future.result()
+                    if isinstance(result, Continue):
+                        running[pool.submit(_call, fn, compute.threads, result.args)] = i
+                    else:
+                        out[i] = result
+                        bar.update(1)
+            return out
     finally:
         bar.close()
 
@@ -88,9 +110,15 @@ def _run_ray(fn: Callable, tasks: list[tuple], compute: Compute, bar) -> list:
         ray.init(address=os.environ.get("RAY_ADDRESS"), runtime_env={"env_vars": env},
                  include_dashboard=False, log_to_driver=False, configure_logging=False)
     remote = ray.remote(num_cpus=compute.threads)(_call)
-    refs = [remote.remote(fn, compute.threads, args) for args in tasks]
-    pending = list(refs)
-    while pending:
-        done, pending = ray.wait(pending, num_returns=1)
-        bar.update(len(done))
-    return ray.get(refs)
+    running = {remote.remote(fn, compute.threads, args): i for i, args in enumerate(tasks)}
+    out = [None] * len(tasks)
+    while running:
+        done, _ = ray.wait(list(running), num_returns=1)
+        i = running.pop(done[0])
+        result = ray.get(done[0])
+        if isinstance(result, Continue):
+            running[remote.remote(fn, compute.threads, result.args)] = i
+        else:
+            out[i] = result
+            bar.update(1)
+    return out

@@ -11,8 +11,10 @@ no other module spells a method's name. An entry names the code that implements 
 
 * ``network``: the model class (its ``arch`` names the checkpoint architecture, its ``config_class`` the
   network knobs), ``config``: the training-knob dataclass, both filled from ``params.yaml``;
-* ``trainer``: ``trainer(data, network_cfg, train_cfg, progress, desc) -> (model, curve, usage)``, where
-  ``data`` is the dataset's frames (``training="dataset"``) or ``(layout, max_steps)`` (``"online"``);
+* ``trainer``: ``trainer(data, network_cfg, train_cfg, progress, desc, network) -> (model, curve, usage)``,
+  where ``data`` is the dataset's frames (``training="dataset"``) or ``(layout, max_steps)`` (``"online"``);
+  each also takes ``stop_after`` (epochs, or env steps online) and ``state``: it then returns a state to
+  continue from instead, which ``state`` resumes (:mod:`hnsdt.models.fit`, ``OnlineRun.pause``);
 * ``agent``: ``agent(model, meta, layout, executor, epsilon, seed)``, the batched agent that is evaluated.
 
 Adding a method: README, "Adding a method".

@@ -81,13 +81,25 @@ def _check_operator_coverage(frames, params: dict, env: str, method: str, behavi
                          "(collect.behaviours in params.yaml)")
 
 
-def train_run(method: str, seed: int, model_cfg, train_cfg, data, facts: dict, progress: bool = False):
-    """Train one seed from scratch: ``(model, checkpoint facts, curve)``."""
-    desc = f"{method} seed {seed}"
+def train_run(method: str, seed: int, model_cfg, train_cfg, data, facts: dict, progress: bool = False,
+              split: bool = False, state=None):
+    """Train one seed: ``(model, checkpoint facts, curve)``. With ``split``, it stops half-way (half its epochs,
+    or half its env steps) and returns :class:`~hnsdt.executor.Continue` with its state (a
+    :class:`~hnsdt.models.fit.FitState` or a paused :class:`~hnsdt.agents.baselines.online.OnlineRun`): the
+    executor queues the second half behind the other seeds' first halves, so 5 seeds on 2 workers take 2.5
+    seed-times, and the weights are the same bytes as in one go (tested)."""
+    from hnsdt.executor import Continue
+
+    online = METHODS[method].training == "online"
+    half = (train_cfg.env_steps if online else train_cfg.epochs) // 2
     trainer = resolve(METHODS[method].trainer)
-    args = data if METHODS[method].training == "online" else (data,)  # online: (layout(s), max_steps)
-    model, curve, usage = trainer(*args, model_cfg, train_cfg, progress=progress, desc=desc,
-                                  network=network_for(method, model_cfg))
+    args = data if online else (data,)  # online: (layout(s), max_steps)
+    out = trainer(*args, model_cfg, train_cfg, progress=progress, desc=f"{method} seed {seed}",
+                  network=network_for(method, model_cfg), state=state,
+                  stop_after=(half or None) if split else None)
+    if not isinstance(out, tuple):  # paused half-way
+        return Continue((method, seed, model_cfg, train_cfg, data, facts, progress, False, out))
+    model, curve, usage = out
     model.cpu()
     return model, {"seed": seed, **facts, "train": asdict(train_cfg), "usage": usage, "curve": curve}, curve
 
@@ -103,7 +115,7 @@ def train_all(runs: list[tuple], env: str, out: Path, curves: Path, compute, pro
 
     inline = compute.executor == "local" and compute.local_workers(len(runs)) == 1
     method = runs[0][0]
-    results = run_tasks(train_run, [(*r, progress and inline) for r in runs], compute,
+    results = run_tasks(train_run, [(*r, progress and inline, True) for r in runs], compute,
                         desc=f"train {env} {method}", progress=progress and not inline)
     with atomic_dir(out) as staging, atomic_dir(curves) as curve_staging:
         staging.mkdir()

@@ -37,7 +37,7 @@ def small_params(**edits) -> dict:
     p["collect"]["fail_probs"] = [0.1]
     for b in p["collect"]["behaviours"]:
         b["episodes"] = 2
-    p["train"].update(envs=["keydoor"], methods=["hnsdt"], seeds=[0], epochs=1, max_steps=2)
+    p["train"].update(envs=["keydoor"], methods=["hnsdt"], seeds=[0], epochs=2, max_steps=0)  # 2: split in halves
     p["baselines"].update(offline=[], online=[])
     p["evaluate"].update(methods=["symbolic", "hnsdt"], episodes=2, fail_probs=[0.1])
     for dotted, value in edits.items():

@@ -14,9 +14,7 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from hnsdt.agents.baselines.online import (
-    OnlineAgent, OnlineConfig, linear_schedule, start_run,
-)
+from hnsdt.agents.baselines.online import OnlineAgent, OnlineConfig, OnlineRun, linear_schedule, start_run
 from hnsdt.envs.keydoor import N_ACTIONS
 from hnsdt.envs.layout import Layout
 from hnsdt.models.qnetwork import QNetwork, QNetworkConfig
@@ -30,15 +28,19 @@ class DQNConfig(OnlineConfig):
 
 
 def train_dqn(layout: Layout | list[Layout], max_steps: int, net_cfg: QNetworkConfig, cfg: DQNConfig,
-              progress: bool = True, desc: str = "train", network: type = QNetwork) -> tuple[QNetwork, list[dict], dict]:
-    """``layout``: one map, or a list to draw from at every reset (then ``network`` reads views)."""
-    run = start_run(layout, max_steps, network, net_cfg, cfg)
+              progress: bool = True, desc: str = "train", network: type = QNetwork, state: OnlineRun | None = None,
+              stop_after: int | None = None):
+    """``layout``: one map, or a list to draw from at every reset (then ``network`` reads views). Returns the
+    model, its curve and the data used; or, when ``stop_after`` env steps come before the end, the paused
+    :class:`OnlineRun`, which ``state`` continues."""
+    run = start_run(layout, max_steps, network, net_cfg, cfg, state)
     rng, device, env, q, target = run.rng, run.device, run.env, run.net, run.target
-    obs, buffer, stats = run.obs, run.buffer, run.stats
-    steps, due, next_log, curve = 0, 0.0, cfg.log_every, []
+    obs, buffer, stats, steps, curve = run.obs, run.buffer, run.stats, run.steps, run.curve
+    due, next_log = run.loop.get("due", 0.0), run.loop.get("next_log", cfg.log_every)
     explore_steps = int(cfg.exploration_fraction * cfg.env_steps)
-    bar = tqdm(total=cfg.env_steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
-    while steps < cfg.env_steps:
+    limit = cfg.env_steps if stop_after is None else min(stop_after, cfg.env_steps)
+    bar = tqdm(total=cfg.env_steps, initial=steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
+    while steps < limit:
         # 1. act ε-greedily in every copy
         epsilon = linear_schedule(cfg.epsilon_start, cfg.epsilon_end, explore_steps, steps)
         with torch.no_grad():
@@ -70,6 +72,8 @@ def train_dqn(layout: Layout | list[Layout], max_steps: int, net_cfg: QNetworkCo
             curve.append(run.curve_row(steps, epsilon))
             bar.set_postfix(success=f"{curve[-1]['success']:.2f}", eps=f"{epsilon:.2f}")
     bar.close()
+    if steps < cfg.env_steps:
+        return run.pause(steps, obs, curve, due=due, next_log=next_log)
     return run.result(steps, curve)
 
 

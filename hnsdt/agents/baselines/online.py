@@ -123,6 +123,22 @@ class OnlineRun:
     stats: EpisodeStats
     grad_steps: int = 0
     losses: list[float] = field(default_factory=list)  # since the last curve row
+    steps: int = 0  # env steps so far
+    curve: list[dict] = field(default_factory=list)
+    loop: dict = field(default_factory=dict)  # the learner's own loop variables, kept while paused
+    torch_rng: torch.Tensor | None = None  # the torch stream, kept while paused (no learner here draws from it yet)
+
+    def pause(self, steps: int, obs: np.ndarray, curve: list[dict], **loop) -> OnlineRun:
+        """The run as it stands, to continue later, in this process or another (pickled whole: the networks,
+        the optimiser, the copies, the buffer and the streams), to the same bytes as one run in one go."""
+        self.steps, self.obs, self.curve, self.loop = steps, obs, curve, loop
+        self.torch_rng = torch.get_rng_state()
+        return self
+
+    def resume(self) -> OnlineRun:
+        if self.torch_rng is not None:
+            torch.set_rng_state(self.torch_rng)
+        return self
 
     def learn(self, loss: torch.Tensor, target_period: int) -> None:
         """One Adam step on ``loss``; the target network copies the online one every ``target_period`` steps."""
@@ -148,9 +164,13 @@ class OnlineRun:
                                  "gradient_steps": self.grad_steps}
 
 
-def start_run(layout: Layout | list[Layout], max_steps: int, network: type, net_cfg, cfg: OnlineConfig) -> OnlineRun:
+def start_run(layout: Layout | list[Layout], max_steps: int, network: type, net_cfg, cfg: OnlineConfig,
+              state: OnlineRun | None = None) -> OnlineRun:
     """Seed torch and numpy, build the training copies, the network (``network(net_cfg)``), its target
-    copy, Adam, the first observations, the replay buffer and the episode statistics."""
+    copy, Adam, the first observations, the replay buffer and the episode statistics; or continue ``state``,
+    a paused run (:meth:`OnlineRun.pause`)."""
+    if state is not None:
+        return state.resume()
     torch.manual_seed(cfg.seed)
     rng = np.random.default_rng(cfg.seed)
     device = torch.device(cfg.device)

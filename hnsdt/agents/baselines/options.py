@@ -24,9 +24,7 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from hnsdt.agents.baselines.online import (
-    OnlineAgent, OnlineConfig, linear_schedule, start_run,
-)
+from hnsdt.agents.baselines.online import OnlineAgent, OnlineConfig, OnlineRun, linear_schedule, start_run
 from hnsdt.envs.layout import Layout
 from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig
 
@@ -53,19 +51,23 @@ def choose_options(q: torch.Tensor, epsilon: float, rng: np.random.Generator) ->
 
 
 def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: OptionCriticConfig, cfg: OptionsConfig,
-                  progress: bool = True, desc: str = "train", network: type = OptionCritic
-                  ) -> tuple[OptionCritic, list[dict], dict]:
-    """``layout``: one map, or a list to draw from at every reset (then ``network`` reads views)."""
-    run = start_run(layout, max_steps, network, net_cfg, cfg)
+                  progress: bool = True, desc: str = "train", network: type = OptionCritic,
+                  state: OnlineRun | None = None, stop_after: int | None = None):
+    """``layout``: one map, or a list to draw from at every reset (then ``network`` reads views). Returns the
+    model, its curve and the data used; or, when ``stop_after`` env steps come before the end, the paused
+    :class:`OnlineRun`, which ``state`` continues."""
+    run = start_run(layout, max_steps, network, net_cfg, cfg, state)
     rng, device, env, net, target = run.rng, run.device, run.env, run.net, run.target
-    obs, buffer, stats = run.obs, run.buffer, run.stats
+    obs, buffer, stats, steps, curve = run.obs, run.buffer, run.stats, run.steps, run.curve
     rows = torch.arange(cfg.num_envs, device=device)
-    option = np.zeros(cfg.num_envs, np.int64)
-    need_option = np.ones(cfg.num_envs, bool)
-    steps, next_log, curve, lengths, option_steps = 0, cfg.log_every, [], [], 0
+    option = run.loop.get("option", np.zeros(cfg.num_envs, np.int64))
+    need_option = run.loop.get("need_option", np.ones(cfg.num_envs, bool))
+    next_log, lengths = run.loop.get("next_log", cfg.log_every), run.loop.get("lengths", [])
+    option_steps = run.loop.get("option_steps", 0)
     explore_steps = int(cfg.exploration_fraction * cfg.env_steps)
-    bar = tqdm(total=cfg.env_steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
-    while steps < cfg.env_steps:
+    limit = cfg.env_steps if stop_after is None else min(stop_after, cfg.env_steps)
+    bar = tqdm(total=cfg.env_steps, initial=steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
+    while steps < limit:
         # 1. pick options where the last one terminated, then an action from each copy's option
         epsilon = linear_schedule(cfg.epsilon_start, cfg.epsilon_end, explore_steps, steps)
         q, _, logits = net(torch.from_numpy(obs).to(device))
@@ -124,6 +126,9 @@ def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: Option
             lengths, option_steps = [], 0
             bar.set_postfix(success=f"{curve[-1]['success']:.2f}", eps=f"{epsilon:.2f}")
     bar.close()
+    if steps < cfg.env_steps:
+        return run.pause(steps, obs, curve, option=option, need_option=need_option, next_log=next_log,
+                         lengths=lengths, option_steps=option_steps)
     return run.result(steps, curve)
 
 

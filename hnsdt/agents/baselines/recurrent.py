@@ -12,9 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from hnsdt.data.windows import Frames
+from hnsdt.models.fit import FitState, Objective, fit
 from hnsdt.models.recurrent import START_ACTION, RecurrentConfig, RecurrentPolicy
 
 
@@ -53,44 +53,26 @@ def episode_batch(frames: Frames, starts: np.ndarray, lengths: np.ndarray) -> di
 
 
 def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTrainConfig, progress: bool = True,
-                    desc: str = "train", network: type = RecurrentPolicy) -> tuple[RecurrentPolicy, list[dict], dict]:
-    """Train from scratch; returns the model (eval mode), its curve and the data used."""
-    torch.manual_seed(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
-    device = torch.device(cfg.device)
+                    desc: str = "train", network: type = RecurrentPolicy, state: FitState | None = None,
+                    stop_after: int | None = None):
+    """Train from scratch (or on from ``state``); returns the model (eval mode), its curve and the data used,
+    or a :class:`~hnsdt.models.fit.FitState` when ``stop_after`` epochs come before the end."""
     starts, lengths = training_episodes(frames, cfg.behaviours)
     if len(starts) == 0:
         raise ValueError(f"no training episodes from behaviours {list(cfg.behaviours) or 'any'} in the dataset")
-    model = network(model_cfg).to(device)
-    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
     per_epoch = int(np.ceil(len(starts) / cfg.batch_size))
-    total = cfg.epochs * per_epoch if not cfg.max_steps else min(cfg.epochs * per_epoch, cfg.max_steps)
-    curve, recent, step, seen = [], [], 0, 0
-    model.train()
-    with tqdm(total=total, desc=desc, unit="step", disable=not progress) as bar:
-        while step < total:
-            order = rng.permutation(len(starts))
-            for b in range(per_epoch):
-                if step >= total:
-                    break
-                rows = order[b * cfg.batch_size:(b + 1) * cfg.batch_size]
-                batch = {k: torch.from_numpy(np.ascontiguousarray(v)).to(device)
-                         for k, v in episode_batch(frames, starts[rows], lengths[rows]).items()}
-                loss = model.loss(batch)
-                opt.zero_grad(set_to_none=True)
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(model.parameters(), 1.0)
-                opt.step()
-                step += 1
-                seen += int(lengths[rows].sum())
-                recent.append(loss.item())
-                bar.update(1)
-                bar.set_postfix(loss=f"{recent[-1]:.4f}")
-                if step % cfg.log_every == 0 or step == total:
-                    curve.append({"step": step, "epoch": step / per_epoch, "frames_seen": seen,
-                                  "loss": float(np.mean(recent))})
-                    recent = []
-    model.eval()
+    objective = Objective(
+        np.arange(len(starts)), lambda rows: episode_batch(frames, starts[rows], lengths[rows]),
+        lambda rows: int(lengths[rows].sum()),
+        lambda step, epoch, seen, loss: {"step": step, "epoch": step / per_epoch, "frames_seen": seen, "loss": loss},
+        clip_grad_norm=1.0)
+    out = fit(network, model_cfg, objective, epochs=cfg.epochs, max_steps=cfg.max_steps, batch_size=cfg.batch_size,
+              lr=cfg.lr, seed=cfg.seed, device=torch.device(cfg.device), log_every=cfg.log_every,
+              progress=progress, desc=desc, state=state, stop_after=stop_after)
+    if isinstance(out, FitState):
+        return out
+    model, curve = out
+    seen, step = (curve[-1]["frames_seen"], curve[-1]["step"]) if curve else (0, 0)
     usage = {"dataset_frames": int(lengths.sum()), "dataset_episodes": int(len(starts)), "frames_seen": seen,
              "gradient_steps": step, "epochs": round(seen / int(lengths.sum()), 3)}
     return model, curve, usage

@@ -1,0 +1,118 @@
+"""The offline training loop of the decision transformers and the RNN baselines, resumable between epochs.
+
+Adam over shuffled batches of examples (window ends; whole episodes), a fixed number of epochs, optionally
+capped at a number of gradient steps. A run can stop after any complete epoch and hand back a
+:class:`FitState` — weights, optimiser moments, both random streams, counters — from which :func:`fit`
+continues, in this process or another, to the same bytes as an uninterrupted run (tested). The training
+stages use this to split every seed in two (:func:`hnsdt.training.train_run`), so that 5 seeds keep 2
+workers busy for 2.5 seed-times instead of 3.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+
+@dataclass
+class FitState:
+    """A run stopped after ``epoch`` complete epochs (picklable, tensors on the CPU)."""
+
+    epoch: int
+    step: int
+    seen: int
+    model: dict  # state_dict
+    optimizer: dict  # state_dict
+    torch_rng: torch.Tensor  # dropout's stream (the CPU generator)
+    cuda_rng: torch.Tensor | None  # ... or the CUDA one, for a run on a GPU
+    rng: np.random.Generator  # the batch order's stream
+    recent: list[float] = field(default_factory=list)  # losses since the last curve row
+    curve: list[dict] = field(default_factory=list)
+
+
+@dataclass
+class Objective:
+    """What one method trains on: ``examples`` (shuffled every epoch), ``batch(rows) -> arrays`` (the model's
+    loss input), ``count(rows)`` (added to the curve's ``seen``), ``curve_row(step, epoch, seen, loss)``."""
+
+    examples: np.ndarray
+    batch: Callable[[np.ndarray], dict]
+    count: Callable[[np.ndarray], int]
+    curve_row: Callable[[int, int, int, float], dict]
+    clip_grad_norm: float = 0.0  # > 0: clip the gradient's norm to this before each step
+
+
+def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_steps: int, batch_size: int,
+        lr: float, seed: int, device: torch.device, log_every: int, progress: bool = True, desc: str = "train",
+        state: FitState | None = None, stop_after: int | None = None, on_epoch=None):
+    """Train ``network(model_cfg)`` from scratch, or from ``state``; returns ``(model in eval mode, curve)``,
+    or a :class:`FitState` when ``stop_after`` (a number of complete epochs) comes before the end.
+    ``on_epoch(epoch, step, model)`` is called after each complete epoch and must neither change the model nor
+    draw random numbers."""
+    torch.manual_seed(seed)
+    model = network(model_cfg).to(device)
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    if state is None:
+        rng = np.random.default_rng(seed)
+        state = FitState(0, 0, 0, {}, {}, torch.get_rng_state(), None, rng)
+    else:  # the weights and streams where the earlier part stopped (construction above drew from the stream)
+        model.load_state_dict(state.model)
+        opt.load_state_dict(state.optimizer)
+        torch.set_rng_state(state.torch_rng)
+        if state.cuda_rng is not None:
+            torch.cuda.set_rng_state(state.cuda_rng)
+    rng, step, seen, recent, curve = state.rng, state.step, state.seen, list(state.recent), list(state.curve)
+    steps_per_epoch = int(np.ceil(len(objective.examples) / batch_size))
+    total = epochs * steps_per_epoch
+    if max_steps:
+        total = min(total, max_steps)
+    end = epochs if stop_after is None else min(epochs, stop_after)
+    bar = tqdm(total=total, initial=step, desc=desc, disable=not progress, unit="step")
+    model.train()
+    for epoch in range(state.epoch, end):
+        if step >= total:
+            break
+        order = rng.permutation(objective.examples)
+        for b in range(steps_per_epoch):
+            if step >= total:
+                break
+            rows = order[b * batch_size:(b + 1) * batch_size]
+            batch = {k: torch.from_numpy(np.ascontiguousarray(v)).to(device, non_blocking=True)
+                     for k, v in objective.batch(rows).items()}
+            loss = model.loss(batch)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            if objective.clip_grad_norm > 0:
+                torch.nn.utils.clip_grad_norm_(model.parameters(), objective.clip_grad_norm)
+            opt.step()
+            step += 1
+            seen += objective.count(rows)
+            recent.append(loss.item())
+            bar.update(1)
+            bar.set_postfix(epoch=epoch + 1, loss=f"{recent[-1]:.4f}")
+            if step % log_every == 0 or step == total:
+                curve.append(objective.curve_row(step, epoch + 1, seen, float(np.mean(recent))))
+                recent = []
+        if on_epoch is not None and step == (epoch + 1) * steps_per_epoch:  # a complete epoch
+            on_epoch(epoch + 1, step, model)
+    bar.close()
+    if end < epochs and step < total:
+        cuda = torch.cuda.get_rng_state() if device.type == "cuda" else None
+        return FitState(end, step, seen, {k: v.cpu() for k, v in model.state_dict().items()},
+                        _to_cpu(opt.state_dict()), torch.get_rng_state(), cuda, rng, recent, curve)
+    model.eval()
+    return model, curve
+
+
+def _to_cpu(obj):
+    if isinstance(obj, torch.Tensor):
+        return obj.cpu()
+    if isinstance(obj, dict):
+        return {k: _to_cpu(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_to_cpu(v) for v in obj]
+    return obj

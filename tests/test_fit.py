@@ -1,0 +1,98 @@
+"""A training run stopped between epochs and continued elsewhere ends in the same bytes as one run in one go;
+the executor queues a task's continuation behind the waiting tasks and returns results in task order."""
+
+import pickle
+
+import numpy as np
+import pytest
+import torch
+
+from hnsdt.agents import SymbolicAgent, rollout
+from hnsdt.agents.baselines.recurrent import RecurrentTrainConfig, train_recurrent
+from hnsdt.data.windows import frames_from_arrays
+from hnsdt.envs import KeyDoorVectorEnv
+from hnsdt.executor import Compute, Continue, run_tasks
+from hnsdt.models.dt import DTConfig
+from hnsdt.models.fit import FitState
+from hnsdt.models.recurrent import RecurrentConfig
+from hnsdt.models.train import TrainConfig, train_dt
+
+
+@pytest.fixture(scope="module")
+def frames(keydoor):
+    eps = rollout(KeyDoorVectorEnv(24, keydoor, 0.2, 100), SymbolicAgent(keydoor), seed=3)
+    cat = lambda f: np.concatenate([f(i, e) for i, e in enumerate(eps)])  # noqa: E731
+    return frames_from_arrays(cat(lambda i, e: e.states[:-1]), cat(lambda i, e: e.actions),
+                              cat(lambda i, e: e.rewards), cat(lambda i, e: e.subgoal_ids),
+                              cat(lambda i, e: e.subgoal_targets), cat(lambda i, e: np.full(e.length, i)),
+                              cat(lambda i, e: np.arange(e.length)))
+
+
+def _dt(frames, keydoor, **kw):
+    cfg = DTConfig("return", keydoor.n_flags, *keydoor.shape, context=4, n_layers=1, d_model=32, dropout=0.3,
+                   max_timestep=100)  # dropout: the resumed half must continue the torch stream too
+    return train_dt(frames, cfg, TrainConfig(epochs=3, batch_size=32, seed=2, log_every=3), progress=False, **kw)
+
+
+def _rnn(frames, keydoor, **kw):
+    cfg = RecurrentConfig(cell="lstm", hierarchical=True, n_flags=keydoor.n_flags, grid_h=keydoor.shape[0],
+                          grid_w=keydoor.shape[1], n_layers=2, hidden=32, embed=16, dropout=0.2)
+    out = train_recurrent(frames, cfg, RecurrentTrainConfig(epochs=3, batch_size=4, seed=2, log_every=3),
+                          progress=False, **kw)
+    return out[:2] if isinstance(out, tuple) else out
+
+
+@pytest.mark.parametrize("train", [_dt, _rnn], ids=["decision_transformer", "lstm"])
+def test_a_run_stopped_and_continued_elsewhere_is_the_run_in_one_go(frames, keydoor, train):
+    whole, whole_curve = train(frames, keydoor)
+    state = train(frames, keydoor, stop_after=1)
+    assert isinstance(state, FitState) and state.epoch == 1 and 0 < state.step < whole_curve[-1]["step"]
+    torch.manual_seed(123)  # another process: whatever its streams were, the state's replace them
+    np.random.seed(123)
+    part, part_curve = train(frames, keydoor, state=pickle.loads(pickle.dumps(state)))
+    assert part_curve == whole_curve
+    for (name, a), b in zip(whole.state_dict().items(), part.state_dict().values()):
+        assert torch.equal(a, b), name
+    assert not part.training
+
+
+def _dqn(keydoor, **kw):
+    from hnsdt.agents.baselines.dqn import DQNConfig, train_dqn
+    from hnsdt.models.qnetwork import QNetworkConfig
+
+    return train_dqn(keydoor, 100, QNetworkConfig(keydoor.n_flags, *keydoor.shape, hidden=32),
+                     DQNConfig(env_steps=1600, learning_starts=400, log_every=400, seed=3), progress=False, **kw)
+
+
+def _options(keydoor, **kw):
+    from hnsdt.agents.baselines.options import OptionsConfig, train_options
+    from hnsdt.models.qnetwork import OptionCriticConfig
+
+    return train_options(keydoor, 100, OptionCriticConfig(keydoor.n_flags, *keydoor.shape, hidden=32),
+                         OptionsConfig(env_steps=1600, learning_starts=400, log_every=400, seed=3), progress=False,
+                         **kw)
+
+
+@pytest.mark.parametrize("train", [_dqn, _options], ids=["dqn", "option_critic"])
+def test_an_online_run_paused_and_continued_elsewhere_is_the_run_in_one_go(keydoor, train):
+    whole, whole_curve, whole_usage = train(keydoor)
+    paused = train(keydoor, stop_after=800)
+    assert not isinstance(paused, tuple) and paused.steps == 800 and paused.grad_steps > 0
+    torch.manual_seed(123)
+    part, part_curve, part_usage = train(keydoor, state=pickle.loads(pickle.dumps(paused)))
+    assert part_usage == whole_usage
+    np.testing.assert_equal(part_curve, whole_curve)  # (NaN losses before learning starts)
+    for (name, a), b in zip(whole.state_dict().items(), part.state_dict().values()):
+        assert torch.equal(a, b), name
+
+
+def _countdown(label: str, parts: int):
+    """A task in ``parts`` parts: it hands back its remaining parts until the last one."""
+    return Continue((label, parts - 1)) if parts > 1 else f"{label} done"
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_continued_tasks_come_back_in_task_order(workers):
+    tasks = [("a", 3), ("b", 1), ("c", 2), ("d", 1), ("e", 2)]
+    out = run_tasks(_countdown, tasks, Compute(workers=workers), progress=False)
+    assert out == ["a done", "b done", "c done", "d done", "e done"]
