@@ -86,12 +86,15 @@ def check_sources(sources: list[Source], fail_prob: float) -> None:
 
 def collect_settings(params: dict):
     """The collection of the training layouts' episodes: ``collect``'s seed, fps, licence and fail_probs, the
-    noisy planner of ``planner``, ``generalisation.episodes_per_layout`` per start."""
+    noisy planner of ``planner``, ``generalisation.episodes_per_layout`` per start, and
+    ``generalisation.random_episodes_per_layout`` random walks (the paper's arm's data)."""
     from hnsdt.config import _section, executor_config
     from hnsdt.data.collect import Behaviour, CollectConfig
 
     g, collect = settings(params), _section(params, "collect")
     behaviours = [Behaviour("noisy_planner", g.episodes_per_layout, start, g.epsilon) for start in ("layout", "random")]
+    if g.random_episodes_per_layout:
+        behaviours.append(Behaviour("random", g.random_episodes_per_layout, "random"))
     return CollectConfig(env_id=f"hnsdt/generated-{g.family}", layout=None, max_steps=g.max_steps,
                          fail_probs=[float(f) for f in collect.fail_probs], behaviours=behaviours, seed=collect.seed,
                          fps=collect.fps, executor=executor_config(params), license=collect.license)
@@ -175,6 +178,7 @@ def _budget(params: dict, method: str, train_cfg):
 
 def plan_runs(params: dict, method: str, dataset: str | Path) -> list[tuple]:
     """One task per seed, in the form :func:`hnsdt.training.train_run` runs."""
+    from hnsdt.config import method_executor
     from hnsdt.data.windows import load_frames
 
     g = settings(params)
@@ -193,10 +197,14 @@ def plan_runs(params: dict, method: str, dataset: str | Path) -> list[tuple]:
             raise ValueError(f"dataset {dataset}: view radius {radius} (0 = no observation.view), but "
                              f"generalisation.view_radius is {g.view_radius}; collect it with "
                              "`python pipeline/generalisation.py collect`")
-        data = load_frames(dataset)
+        data = load_frames(dataset, method_executor(params, method).operators)  # (the paper's arm: Move labels)
         facts = {"dataset": str(dataset), "family": g.family,
                  "target_return": float(data.returns_to_go[np.unique(data.episode_start)].max())}
     net_cfg, train_cfg = network_configs(params, method, g.seeds[0])  # (the layouts are generated once)
+    wanted = list(getattr(train_cfg, "behaviours", ()))
+    if not online and wanted and not np.isin(data.policy, wanted).any():
+        raise ValueError(f"{method} learns from {wanted} episodes and {dataset} holds none; set "
+                         "generalisation.random_episodes_per_layout > 0 (random walks) and collect again")
     return [(method, seed, net_cfg, replace(train_cfg, seed=seed), data, facts) for seed in g.seeds]
 
 
@@ -239,7 +247,7 @@ def evaluate_run(method: str, seed: int, sources: list[Source], fail_probs: list
 def evaluate(params: dict, models_root: str | Path, out_dir: str | Path, compute=None,
              progress: bool = True) -> pd.DataFrame:
     """Run every method × seed on every evaluated layout; write ``episodes.csv`` and ``summary.csv``."""
-    from hnsdt.config import baseline_eval_epsilon, executor_config, fail_probs
+    from hnsdt.config import baseline_eval_epsilon, fail_probs, method_executor
     from hnsdt.models.checkpoint import load_checkpoint
     from hnsdt.executor import Compute, run_tasks
     from hnsdt.fileio import atomic_dir
@@ -248,7 +256,6 @@ def evaluate(params: dict, models_root: str | Path, out_dir: str | Path, compute
     fps = fail_probs(params, "evaluate.fail_probs", params["evaluate"]["fail_probs"])
     sources = layout_splits(params, evaluated_only=True)
     check_sources(sources, max(fps))
-    executor = executor_config(params)
     methods = [*g.learned, REFERENCE]
     tasks = []
     for method in methods:
@@ -262,7 +269,7 @@ def evaluate(params: dict, models_root: str | Path, out_dir: str | Path, compute
                     raise ValueError(f"{path} is not a view model (train it with `python pipeline/generalisation.py "
                                      f"train --method {method}`)")
                 eps = baseline_eval_epsilon(params, method) if METHODS[method].training == "online" else 0.0
-            tasks.append((method, seed, sources, fps, g.episodes, executor, model, meta, eps))
+            tasks.append((method, seed, sources, fps, g.episodes, method_executor(params, method), model, meta, eps))
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
     table = pd.DataFrame([row for rows in results for row in rows])
     optimal = {(s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fps}

@@ -144,6 +144,8 @@ class GeneralisationParams(Section):
     episodes_per_layout: PositiveInt = Field(description="noisy-planner episodes per training layout and start "
                                              "(the layout's start and random starts)")
     epsilon: Probability = Field(0.1, description="the noisy planner's share of random actions")
+    random_episodes_per_layout: int = Field(0, ge=0, description="random-exploration episodes per training layout "
+                                            "(random starts): what the paper's arm learns from")
     methods: list[Literal[DT_METHODS]] = Field(default_factory=list, description="decision transformers (knobs: "
                                                "train, models.<family>)")
     baselines: list[Literal[BASELINES]] = Field(default_factory=list, description="the other learned methods "

@@ -373,3 +373,33 @@ def test_a_methods_budget_replaces_the_protocols_knobs_and_a_bad_one_is_named(tm
     params["generalisation"]["budgets"] = {"gru": {"epochs": "3"}}
     with pytest.raises(ParamsError, match=r"generalisation.budgets.gru.epochs must be int, got '3'"):
         gen.network_configs(params, "gru", 0)
+
+
+def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operators(tmp_path):
+    """`random_episodes_per_layout` adds random walks to the dataset; the paper's HNSDT trains on them with the
+    paper's Move labels and is evaluated under the paper's planner (BFS over Move operators); without random
+    walks its training stops with one line naming the knob."""
+    from hnsdt import generalisation as gen
+    from hnsdt.executor import Compute
+    from hnsdt.models.checkpoint import save_checkpoint
+    from hnsdt.symbolic.subgoals import NAME_TO_ID
+    from hnsdt.training import train_run
+
+    params = _tiny_generalisation_params(tmp_path)
+    g = params["generalisation"]
+    g.update(methods=["hnsdt_paper"], baselines=[])
+    planner_only = gen.collect(params, tmp_path / "planner", {}, progress=False)
+    no_walks = r"hnsdt_paper learns from \['random'\] episodes and .*generalisation\.random_episodes_per_layout"
+    with pytest.raises(ValueError, match=no_walks):
+        gen.plan_runs(params, "hnsdt_paper", planner_only)
+    g["random_episodes_per_layout"] = 2
+    dataset = gen.collect(params, tmp_path / "ds", {}, progress=False)
+    (run,) = gen.plan_runs(params, "hnsdt_paper", dataset)
+    frames = run[4]
+    walks = frames.policy == "random"
+    assert walks.sum() > 0 and (~walks).sum() > 0
+    assert NAME_TO_ID["Move"] in set(frames.subgoals[walks].tolist())  # the paper's labels, not GoTo
+    model, facts, _ = train_run(*run)
+    save_checkpoint(model, tmp_path / "models/hnsdt_paper/seed0", {"method": "hnsdt_paper", **facts})
+    table = gen.evaluate(params, tmp_path / "models", tmp_path / "results", Compute(workers=1), progress=False)
+    assert set(table.method) == {"hnsdt_paper", "symbolic"} and set(table.split) == {"train", "heldout", "minigrid"}
