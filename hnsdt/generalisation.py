@@ -259,6 +259,7 @@ def evaluate(params: dict, models_root: str | Path, out_dir: str | Path, compute
     methods = [*g.learned, REFERENCE]
     tasks = []
     for method in methods:
+        executor = method_executor(params, method)  # (its arm's planner: the paper's arm plans over Move)
         for seed in g.seeds:
             if method == REFERENCE:
                 model, meta, eps = None, {}, 0.0
@@ -269,7 +270,7 @@ def evaluate(params: dict, models_root: str | Path, out_dir: str | Path, compute
                     raise ValueError(f"{path} is not a view model (train it with `python pipeline/generalisation.py "
                                      f"train --method {method}`)")
                 eps = baseline_eval_epsilon(params, method) if METHODS[method].training == "online" else 0.0
-            tasks.append((method, seed, sources, fps, g.episodes, method_executor(params, method), model, meta, eps))
+            tasks.append((method, seed, sources, fps, g.episodes, executor, model, meta, eps))
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
     table = pd.DataFrame([row for rows in results for row in rows])
     optimal = {(s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fps}

@@ -115,7 +115,8 @@ def train_all(runs: list[tuple], env: str, out: Path, curves: Path, compute, pro
 
     inline = compute.executor == "local" and compute.local_workers(len(runs)) == 1
     method = runs[0][0]
-    results = run_tasks(train_run, [(*r, progress and inline, True) for r in runs], compute,
+    # seeds split in halves where they share workers (in one process a split would only cost a model rebuild)
+    results = run_tasks(train_run, [(*r, progress and inline, not inline) for r in runs], compute,
                         desc=f"train {env} {method}", progress=progress and not inline)
     with atomic_dir(out) as staging, atomic_dir(curves) as curve_staging:
         staging.mkdir()

@@ -57,15 +57,15 @@ def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_step
     model = network(model_cfg).to(device)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     if state is None:
-        rng = np.random.default_rng(seed)
-        state = FitState(0, 0, 0, {}, {}, torch.get_rng_state(), None, rng)
+        first, step, seen, recent, curve, rng = 0, 0, 0, [], [], np.random.default_rng(seed)
     else:  # the weights and streams where the earlier part stopped (construction above drew from the stream)
         model.load_state_dict(state.model)
         opt.load_state_dict(state.optimizer)
         torch.set_rng_state(state.torch_rng)
         if state.cuda_rng is not None:
             torch.cuda.set_rng_state(state.cuda_rng)
-    rng, step, seen, recent, curve = state.rng, state.step, state.seen, list(state.recent), list(state.curve)
+        first, step, seen, recent, curve, rng = (state.epoch, state.step, state.seen, list(state.recent),
+                                                 list(state.curve), state.rng)
     steps_per_epoch = int(np.ceil(len(objective.examples) / batch_size))
     total = epochs * steps_per_epoch
     if max_steps:
@@ -73,7 +73,7 @@ def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_step
     end = epochs if stop_after is None else min(epochs, stop_after)
     bar = tqdm(total=total, initial=step, desc=desc, disable=not progress, unit="step")
     model.train()
-    for epoch in range(state.epoch, end):
+    for epoch in range(first, end):
         if step >= total:
             break
         order = rng.permutation(objective.examples)
