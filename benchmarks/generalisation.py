@@ -11,6 +11,7 @@ Run: python benchmarks/generalisation.py [--family multikeydoor] [--train-layout
 """
 
 import argparse
+import copy
 import tempfile
 import time
 from pathlib import Path
@@ -24,6 +25,7 @@ pin_process()
 
 from hnsdt import generalisation as gen  # noqa: E402
 from hnsdt.config import compute_settings, load_params  # noqa: E402
+from hnsdt.params import validate  # noqa: E402
 from hnsdt.evaluation.report import SPLIT_LABELS, generalisation_table  # noqa: E402
 from hnsdt.training import train_all  # noqa: E402
 
@@ -42,8 +44,8 @@ def main() -> None:
     ap.add_argument("--no-minigrid", action="store_true", help="no MiniGrid split (a family whose flags differ)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = ap.parse_args()
-    params = load_params(args.params)
-    g = params["generalisation"]
+    raw = copy.deepcopy(load_params(args.params).raw)
+    g = raw["generalisation"]
     if args.family:
         g.update(family=args.family, max_steps=MAX_STEPS[args.family])
     for key, value in (("train_layouts", args.train_layouts), ("heldout_layouts", args.heldout_layouts),
@@ -61,6 +63,7 @@ def main() -> None:
         key, _, value = item.partition("=")
         g[key] = yaml.safe_load(value)
     g["evaluated_train_layouts"] = min(g["evaluated_train_layouts"], g["train_layouts"])
+    params = validate(raw, f"{args.params} with the command line's changes")
     compute = compute_settings(params)
     times = {}
     with tempfile.TemporaryDirectory() as tmp:

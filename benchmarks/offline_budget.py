@@ -30,14 +30,15 @@ def run(method, env, seed, epochs, keep, params_path, episodes, fail_probs):
     from dataclasses import replace
     from pathlib import Path
 
-    from hnsdt.config import env_settings, load_params, method_executor
+    from hnsdt.config import env_spec, load_params, method_executor
     from hnsdt.evaluation.evaluate import Cell, build_agent, run_cell
     from hnsdt.methods import DT_METHODS
     from hnsdt.models.train import train_dt
     from hnsdt.training import plan_runs
 
     params = load_params(params_path)
-    (_, _, model_cfg, cfg, frames, facts), = plan_runs(params, env, method, [seed], Path(f"data/datasets/{env}"))
+    (task,) = plan_runs(params, env, method, [seed], Path(f"data/datasets/{env}"))
+    model_cfg, cfg, frames, facts = task.model_cfg, task.train_cfg, task.data, task.facts
     snaps = {}
     if method in DT_METHODS:
         model, curve = train_dt(frames, model_cfg, replace(cfg, epochs=max(epochs), max_steps=0), progress=False,
@@ -49,16 +50,16 @@ def run(method, env, seed, epochs, keep, params_path, episodes, fail_probs):
         for e in sorted(keep):
             model, _, usage = train_recurrent(frames, model_cfg, replace(cfg, epochs=e, max_steps=0), progress=False)
             snaps[e] = (usage["gradient_steps"], model)
-    E, ex = env_settings(params, env), method_executor(params, method)
+    E, ex = env_spec(params, env), method_executor(params, method)
     rows = []
     for e, (step, m) in sorted(snaps.items()):
         m.eval()
         loss = [r["loss"] for r in curve if r["step"] <= step][-1] if method in DT_METHODS else float("nan")
-        for fi, fp in enumerate(params["evaluate"]["fail_probs"]):
+        for fi, fp in enumerate(params.evaluate.fail_probs):
             if fp not in fail_probs:
                 continue
-            agent = build_agent(method, E["layout"], ex, m, facts)
-            eps = run_cell(Cell(method, env, fp, seed), fi, E["layout"], E["max_steps"], episodes, agent)
+            agent = build_agent(method, E.layout, ex, m, facts)
+            eps = run_cell(Cell(method, env, fp, seed), fi, E.layout, E.max_steps, episodes, agent)
             ok = [x.length for x in eps if x.success]
             segments = [s.achieved for x in eps for s in x.segments]
             rows.append({"method": method, "seed": seed, "epochs": e, "steps": step, "loss": loss, "fail_prob": fp,
@@ -70,7 +71,7 @@ def run(method, env, seed, epochs, keep, params_path, episodes, fail_probs):
 def main() -> None:
     import pandas as pd
 
-    from hnsdt.executor import Compute, run_tasks
+    from hnsdt.compute import Compute, run_tasks
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--env", default="multikeydoor")

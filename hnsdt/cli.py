@@ -16,15 +16,15 @@ from hnsdt.methods import LEARNED
 
 def _resolve_env(args) -> tuple[str, object, int]:
     """--env is a params env name (keydoor), or a registered id; --layout overrides the layout."""
-    from hnsdt.config import env_settings, load_params
+    from hnsdt.config import env_spec, load_params
     from hnsdt.envs import ENV_IDS, load_layout
 
     if args.env in ENV_IDS:
         kwargs = ENV_IDS[args.env][1]
         env_id, layout, max_steps = args.env, load_layout(kwargs["layout"]), kwargs["max_steps"]
     else:
-        env = env_settings(load_params(args.params), args.env)
-        env_id, layout, max_steps = env["id"], env["layout"], env["max_steps"]
+        env = env_spec(load_params(args.params), args.env)
+        env_id, layout, max_steps = env.id, env.layout, env.max_steps
     if getattr(args, "layout", None):
         layout = load_layout(args.layout)
     return env_id, layout, max_steps
@@ -113,16 +113,16 @@ def cmd_train(args) -> None:
     """Train one method on one env for every seed (train.seeds, or --seed): one task per seed on the
     executor of ``compute`` (or --executor/--workers). Same seed, same weights, whatever the executor and
     however many workers (tested)."""
-    from hnsdt.config import compute_settings, env_settings, load_params, train_settings
+    from hnsdt.config import compute_settings, env_spec, load_params, train_settings
     from hnsdt.training import plan_runs, train_all
 
     params = load_params(args.params)
     ts = train_settings(params)
-    if args.env not in ts["envs"]:
-        raise ValueError(f"env {args.env!r} is not in train.envs {ts['envs']}")
-    env_settings(params, args.env)
+    if args.env not in ts.envs:
+        raise ValueError(f"env {args.env!r} is not in train.envs {list(ts.envs)}")
+    env_spec(params, args.env)
     compute = compute_settings(params, args.executor, args.workers)
-    seeds = args.seed if args.seed is not None else ts["seeds"]
+    seeds = args.seed if args.seed is not None else list(ts.seeds)
     out = Path(args.out or f"models/{args.env}/{args.method}")
     curves = Path(args.curves or f"plots/train/{args.env}-{args.method}")
     runs = plan_runs(params, args.env, args.method, seeds, Path(args.dataset or f"data/datasets/{args.env}"))
@@ -131,18 +131,18 @@ def cmd_train(args) -> None:
 
 
 def cmd_evaluate(args) -> None:
-    from hnsdt.config import compute_settings, env_settings, evaluate_settings, executor_config, load_params
+    from hnsdt.config import compute_settings, env_spec, evaluate_settings, executor_config, load_params
     from hnsdt.evaluation.evaluate import evaluate_all, summary
     from hnsdt.methods import ARMS
     from hnsdt.provenance import git_revision, params_digest
 
     params = load_params(args.params)
-    settings = evaluate_settings(params) | {"datasets": args.datasets}
-    envs = {e: env_settings(params, e) for e in settings["envs"]}
+    settings = evaluate_settings(params)
+    envs = {e: env_spec(params, e) for e in settings.envs}
     compute = compute_settings(params, args.executor, args.workers)
     provenance = {"git_revision": git_revision(), "params_digest": params_digest(params)}  # into each recording
     executors = {arm: executor_config(params, arm) for arm in ARMS}
-    table = evaluate_all(settings, envs, executors, args.models, args.out, progress=not args.quiet,
+    table = evaluate_all(settings, envs, executors, args.models, args.out, args.datasets, progress=not args.quiet,
                          recordings_dir=args.recordings, compute=compute, provenance=provenance)
     summ = summary(table)
     print(summ[["method", "env", "fail_prob", "success_mean", "steps_mean", "reward_mean"]].to_string(
@@ -242,14 +242,14 @@ def cmd_generalisation(args) -> None:
         runs = gen.plan_runs(params, args.method, Path(args.dataset))
         train_all(runs, gen.settings(params).family, Path(args.out), Path(args.curves), compute,
                   progress=not args.quiet)
-        print(f"wrote {', '.join(f'seed{r[1]}' for r in runs)} -> {args.out}/ (curves: {args.curves}/)")
+        print(f"wrote {', '.join(f'seed{r.seed}' for r in runs)} -> {args.out}/ (curves: {args.curves}/)")
         return
     table = gen.evaluate(params, Path(args.models), Path(args.out), compute, progress=not args.quiet)
     print(f"wrote {args.out}/episodes.csv ({len(table)} episodes), summary.csv, layouts.csv")
 
 
 def _compute_arguments(p: argparse.ArgumentParser) -> None:
-    from hnsdt.executor import EXECUTORS
+    from hnsdt.compute import EXECUTORS
 
     p.add_argument("--executor", choices=EXECUTORS, help="where the runs execute (default: compute.executor); "
                    "ray connects to RAY_ADDRESS or starts a local instance. The outputs do not depend on it")

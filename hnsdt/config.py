@@ -1,12 +1,17 @@
-"""params.yaml -> the library's configs.
+"""params.yaml -> the library's typed settings.
 
-The schema of the file (every knob's type, range, default and meaning) is :mod:`hnsdt.params`; this module
-loads a params file, validates it there (bad input stops with one line naming the key) and builds the typed
-configs each stage runs with.
+The schema of the file (every knob's type, range, default and meaning) is :mod:`hnsdt.params`. This module
+loads a params file and validates it there once (bad input stops with one line naming the file and the key):
+:func:`load_params` returns the :class:`~hnsdt.params.Params` model that every stage takes, and the functions
+below turn its sections into the frozen settings each stage runs with (an :class:`EnvSpec`, the planner's
+:class:`~hnsdt.agents.executor.ExecutorConfig`, :class:`TrainSettings`, :class:`BaselineSettings`,
+:class:`EvaluateSettings`). Nothing below the command line reads a params mapping.
 """
 
 from __future__ import annotations
 
+import dataclasses
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -15,79 +20,62 @@ import yaml
 from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.data.collect import POLICIES, Behaviour, CollectConfig
 from hnsdt.envs import ENV_IDS, LayoutError, load_layout
+from hnsdt.envs.layout import Layout
 from hnsdt.methods import BASELINES, DT_METHODS, METHODS, PROPOSED, resolve
-from hnsdt.params import SECTIONS, Params, validate
+from hnsdt.params import SECTIONS, Params, ParamsError, validate
+
+__all__ = ["ParamsError", "Params", "load_params", "EnvSpec", "env_spec", "executor_config", "method_executor",
+           "collect_config", "model_config", "TrainSettings", "train_settings", "BaselineSettings",
+           "baseline_settings", "fill", "compute_settings", "EvaluateSettings", "evaluate_settings"]
 
 
-class ParamsError(ValueError):
-    """A malformed params file; the message names the file and the key."""
-
-
-def load_params(path: str | Path = "params.yaml") -> dict[str, Any]:
-    """The params file as a mapping (validated; ``_path`` records where it came from)."""
+def load_params(path: str | Path = "params.yaml") -> Params:
+    """The params file, validated whole before any work starts."""
     path = Path(path)
     if not path.is_file():
         raise ParamsError(f"{path}: no such params file")
     try:
-        params = yaml.safe_load(path.read_text())
+        raw = yaml.safe_load(path.read_text())
     except yaml.YAMLError as e:
         mark = getattr(e, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark else ""
         raise ParamsError(f"{path}: not valid YAML{where}") from None
-    if not isinstance(params, dict):
+    if not isinstance(raw, dict):
         raise ParamsError(f"{path}: expected a mapping of sections at the top level")
-    unknown = sorted(set(params) - set(SECTIONS))
+    unknown = sorted(set(raw) - set(SECTIONS))
     if unknown:
         raise ParamsError(f"{path}: unknown section(s) {unknown}; params.yaml has {', '.join(SECTIONS)}")
-    params["_path"] = str(path)
-    typed(params)  # every knob checked before any work starts
-    return params
+    return validate(raw, str(path))
 
 
-def typed(params: dict) -> Params:
-    """The params as typed sections (:class:`hnsdt.params.Params`); keys starting with ``_`` are bookkeeping."""
-    try:
-        return validate({k: v for k, v in params.items() if not k.startswith("_")}, _source(params))
-    except ValueError as e:
-        raise ParamsError(str(e)) from None
+@dataclass(frozen=True)
+class EnvSpec:
+    """One environment to run on: a key of ``envs``, or a generated family of the unseen-layout experiment."""
+
+    name: str
+    id: str  # gymnasium id
+    layout: Layout | None  # None: many layouts (a generated family)
+    max_steps: int
 
 
-def _section(params: dict, name: str, spec: Params | None = None):
-    """A section that the running command needs (and a partial params file may lack); ``spec``: the params
-    already validated by the caller."""
-    section = getattr(spec or typed(params), name)
-    if section is None:
-        raise _fail(params, f"missing key {name}")
-    return section
-
-
-def _source(params: dict) -> str:
-    return params.get("_path", "params")
-
-
-def _fail(params: dict, msg: str) -> ParamsError:
-    return ParamsError(f"{_source(params)}: {msg}")
-
-
-def env_settings(params: dict, name: str) -> dict:
-    """``name``, gymnasium ``id``, the loaded ``layout`` and ``max_steps`` of one env of ``envs``."""
-    envs = typed(params).envs
-    if name not in envs:
-        raise _fail(params, f"unknown env {name!r}; params defines {', '.join(envs) or 'none'}")
-    env = envs[name]
+def env_spec(params: Params, name: str) -> EnvSpec:
+    """``envs.<name>`` with its layout loaded."""
+    if name not in params.envs:
+        raise params.error(f"unknown env {name!r}; params defines {', '.join(params.envs) or 'none'}")
+    env = params.envs[name]
     if env.id not in ENV_IDS:
-        raise _fail(params, f"envs.{name}.id {env.id!r} is not a registered id ({', '.join(ENV_IDS)})")
+        raise params.error(f"envs.{name}.id {env.id!r} is not a registered id ({', '.join(ENV_IDS)})")
     try:
         layout = load_layout(env.layout)
     except LayoutError as e:
-        raise _fail(params, f"envs.{name}.layout: {e}") from None
-    return {"name": name, "id": env.id, "layout": layout, "max_steps": env.max_steps}
+        raise params.error(f"envs.{name}.layout: {e}") from None
+    return EnvSpec(name, env.id, layout, env.max_steps)
 
 
-def executor_config(params: dict, arm: str = "ours") -> ExecutorConfig:
+def executor_config(params: Params, arm: str = "ours") -> ExecutorConfig:
     """The planner and executor settings of an arm: ``planner`` (ours) or ``planner.paper`` over it (the
     paper's arm; its mode and operators default to the paper's BFS over Move operators)."""
-    planner = typed(params).planner
+    planner = params.planner
     mode, operators = planner.mode, planner.operators
     factor, minimum = planner.allowance_factor, planner.allowance_min
     if arm == "paper":
@@ -99,77 +87,74 @@ def executor_config(params: dict, arm: str = "ours") -> ExecutorConfig:
                           allowance_min=minimum)
 
 
-def method_executor(params: dict, method: str) -> ExecutorConfig:
+def method_executor(params: Params, method: str) -> ExecutorConfig:
     """The executor settings a plan-following method runs with (its arm's planner)."""
     return executor_config(params, METHODS[method].arm)
 
 
-def fail_probs(params: dict, key: str, values) -> list[float]:
-    if not isinstance(values, list) or not values or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v <= 1 for v in values):
-        raise _fail(params, f"{key} must be a non-empty list of numbers in [0, 1], got {values!r}")
-    return [float(v) for v in values]
-
-
-def collect_config(params: dict, name: str) -> CollectConfig:
-    env = env_settings(params, name)
-    collect = _section(params, "collect")
+def collect_config(params: Params, name: str) -> CollectConfig:
+    env = env_spec(params, name)
+    collect = params.need("collect")
     behaviours = [Behaviour(b.policy, b.episodes, b.start, float(b.epsilon)) for b in collect.behaviours]
     return CollectConfig(
-        env_id=env["id"], layout=env["layout"], max_steps=env["max_steps"],
+        env_id=env.id, layout=env.layout, max_steps=env.max_steps,
         fail_probs=[float(f) for f in collect.fail_probs], behaviours=behaviours, seed=collect.seed, fps=collect.fps,
         executor=executor_config(params), license=collect.license, render=collect.render,
     )
 
 
-def model_config(params: dict, env_name: str, condition: str):
+def model_config(params: Params, env_name: str, condition: str):
     """The decision transformer of ``models.<env>`` for one conditioning."""
     from hnsdt.models.dt import DTConfig
 
-    env = env_settings(params, env_name)
-    spec = typed(params)
-    if env_name not in spec.models:
-        raise _fail(params, f"missing key models.{env_name} (the decision transformers' size on that env)")
-    sizes = spec.models[env_name]
+    env = env_spec(params, env_name)
+    if env_name not in params.models:
+        raise params.error(f"missing key models.{env_name} (the decision transformers' size on that env)")
+    sizes = params.models[env_name]
     try:
-        return DTConfig(condition=condition, n_flags=env["layout"].n_flags, grid_h=env["layout"].shape[0],
-                        grid_w=env["layout"].shape[1], dropout=_section(params, "train").dropout,
-                        max_timestep=env["max_steps"],
+        return DTConfig(condition=condition, n_flags=env.layout.n_flags, grid_h=env.layout.shape[0],
+                        grid_w=env.layout.shape[1], dropout=params.need("train").dropout,
+                        max_timestep=env.max_steps,
                         tokens=sizes.tokens, n_layers=sizes.n_layers, n_heads=sizes.n_heads,
                         d_model=sizes.d_model, context=sizes.context)
     except ValueError as e:
-        raise _fail(params, f"models.{env_name}: {e}") from None
+        raise params.error(f"models.{env_name}: {e}") from None
 
 
-def train_settings(params: dict) -> dict:
-    """The decision transformers' training (``train``): envs, methods, seeds, the shared ``TrainConfig`` and
-    each method's behaviours and loss."""
+@dataclass(frozen=True)
+class TrainSettings:
+    """The decision transformers' training (``train``)."""
+
+    envs: tuple[str, ...]
+    methods: tuple[str, ...]
+    seeds: tuple[int, ...]
+    config: Any  # the shared hnsdt.models.train.TrainConfig
+    behaviours: dict[str, tuple[str, ...]]  # per method: the collected episodes it learns from (empty = all)
+    loss: dict[str, str]  # per method: the window steps its loss counts
+
+    def method_config(self, method: str, seed: int):
+        """The training config of one method and seed."""
+        return replace(self.config, seed=seed, behaviours=self.behaviours[method], loss=self.loss[method])
+
+
+def train_settings(params: Params) -> TrainSettings:
     from hnsdt.data.windows import LOSS_STEPS
     from hnsdt.models.train import TrainConfig
 
-    train = _section(params, "train")
+    train = params.need("train")
     for e in train.envs:
-        env_settings(params, e)
-    return {
-        "envs": list(train.envs), "methods": list(train.methods), "seeds": list(train.seeds),
-        "config": TrainConfig(epochs=train.epochs, batch_size=train.batch_size, lr=float(train.lr),
-                              max_steps=train.max_steps, device=train.device),
-        "behaviours": {m: tuple(train.behaviours.get(m, [])) for m in DT_METHODS},
-        "loss": {m: train.loss.get(m, LOSS_STEPS[0]) for m in DT_METHODS},
-    }
+        env_spec(params, e)
+    return TrainSettings(
+        envs=tuple(train.envs), methods=tuple(train.methods), seeds=tuple(train.seeds),
+        config=TrainConfig(epochs=train.epochs, batch_size=train.batch_size, lr=float(train.lr),
+                           max_steps=train.max_steps, device=train.device),
+        behaviours={m: tuple(train.behaviours.get(m, [])) for m in DT_METHODS},
+        loss={m: train.loss.get(m, LOSS_STEPS[0]) for m in DT_METHODS})
 
 
-def baseline_lists(params: dict) -> dict[str, list[str]]:
-    """The baselines to train: ``baselines.offline`` (on the dataset) and ``baselines.online``."""
-    baselines = typed(params).baselines
-    return {"offline": list(baselines.offline), "online": list(baselines.online)}
-
-
-def _fill(params: dict, key: str, cls, section: dict, **fixed):
+def fill(params: Params, key: str, cls, section: dict, **fixed):
     """A dataclass from the entries of ``section`` that name its fields, each checked against the type of
-    the field's default (tuples come from lists)."""
-    import dataclasses
-
+    the field's default (tuples come from lists); ``key`` names the section in errors."""
     values = {}
     for f in dataclasses.fields(cls):
         if f.name not in section or f.name in fixed:
@@ -177,41 +162,49 @@ def _fill(params: dict, key: str, cls, section: dict, **fixed):
         v, default = section[f.name], f.default
         if isinstance(default, tuple):
             if not isinstance(v, list):
-                raise _fail(params, f"{key}.{f.name} must be a list, got {v!r}")
+                raise params.error(f"{key}.{f.name} must be a list, got {v!r}")
             v = tuple(v)
         elif isinstance(default, bool) or isinstance(v, bool):
             if not isinstance(v, bool) or not isinstance(default, bool):
-                raise _fail(params, f"{key}.{f.name} must be {type(default).__name__}, got {v!r}")
+                raise params.error(f"{key}.{f.name} must be {type(default).__name__}, got {v!r}")
         elif isinstance(default, float) and isinstance(v, (int, float)):
             v = float(v)
         elif not isinstance(v, type(default)):
-            raise _fail(params, f"{key}.{f.name} must be {type(default).__name__}, got {v!r}")
+            raise params.error(f"{key}.{f.name} must be {type(default).__name__}, got {v!r}")
         values[f.name] = v
     try:
         return cls(**values, **fixed)
     except (TypeError, ValueError) as e:
-        raise _fail(params, f"{key}: {e}") from None
+        raise params.error(f"{key}: {e}") from None
 
 
-def baseline_settings(params: dict, method: str, env_name: str, seed: int, env: dict | None = None) -> dict:
-    """Network config, training config and evaluation knobs of one baseline on one env and seed, from
-    ``baselines.<method>``; unknown keys and wrongly typed values are errors. ``env`` (layout, max_steps)
-    replaces ``envs.<env_name>`` (the generalisation experiment: ``env_name`` is then its family)."""
-    import dataclasses
+@dataclass(frozen=True)
+class BaselineSettings:
+    """One baseline on one env and seed: its network config, training config and evaluation exploration."""
 
+    method: str
+    env: EnvSpec
+    model: Any  # the registry entry's network config
+    train: Any  # the registry entry's training config
+    eval_epsilon: float = 0.0  # online methods: the evaluation's exploration (0 = greedy)
+
+
+def baseline_settings(params: Params, method: str, env: str | EnvSpec, seed: int) -> BaselineSettings:
+    """The knobs of ``baselines.<method>`` on one env and seed; unknown keys and wrongly typed values are
+    errors. ``env``: a key of ``envs``, or the spec of a generated family (the unseen-layout experiment: a
+    per-env budget is then looked up under the family's name)."""
     from hnsdt.models.train import pick_device
 
     if method not in BASELINES:
-        raise _fail(params, f"{method!r} is not a baseline; expected one of {list(BASELINES)}")
+        raise params.error(f"{method!r} is not a baseline; expected one of {list(BASELINES)}")
     key = f"baselines.{method}"
-    spec = typed(params)
-    section = (spec.baselines.model_extra or {}).get(method)
+    section = (params.baselines.model_extra or {}).get(method)
     if section is None:
-        raise _fail(params, f"missing key {key} (the knobs of {method})")
+        raise params.error(f"missing key {key} (the knobs of {method})")
     section = dict(section)
-    env = env or env_settings(params, env_name)
-    lay = env["layout"]
-    device = str(pick_device(_section(params, "train", spec).device))
+    env = env_spec(params, env) if isinstance(env, str) else env
+    lay = env.layout
+    device = str(pick_device(params.need("train").device))
     grid = {"n_flags": lay.n_flags, "grid_h": lay.shape[0], "grid_w": lay.shape[1]}
     entry = METHODS[method]
     net_cls, train_cls = resolve(entry.network).config_class, resolve(entry.config)
@@ -221,71 +214,90 @@ def baseline_settings(params: dict, method: str, env_name: str, seed: int, env: 
     if "behaviours" in train_fields:  # offline: the collection behaviours it learns from
         behaviours = section.get("behaviours", [])
         if not isinstance(behaviours, list) or not set(behaviours) <= set(POLICIES):
-            raise _fail(params, f"{key}.behaviours must be a list drawn from {POLICIES}, got {behaviours!r}")
+            raise params.error(f"{key}.behaviours must be a list drawn from {POLICIES}, got {behaviours!r}")
         train_fixed["behaviours"] = tuple(behaviours)
     if "env_steps" in train_fields:  # online: a budget of environment steps, one number or one per env
         budget = section.get("env_steps")
         if isinstance(budget, dict):
-            budget = budget.get(env_name)
+            budget = budget.get(env.name)
         if not isinstance(budget, int) or isinstance(budget, bool) or budget < 1:
-            raise _fail(params, f"{key}.env_steps must be a positive integer or a mapping env -> one "
-                        f"(missing or bad for {env_name!r}: {section.get('env_steps')!r})")
+            raise params.error(f"{key}.env_steps must be a positive integer or a mapping env -> one "
+                               f"(missing or bad for {env.name!r}: {section.get('env_steps')!r})")
         train_fixed["env_steps"] = budget
     if "fail_probs" in train_fields and "fail_probs" in section:
-        train_fixed["fail_probs"] = tuple(fail_probs(params, f"{key}.fail_probs", section["fail_probs"]))
+        train_fixed["fail_probs"] = tuple(_fail_probs(params, f"{key}.fail_probs", section["fail_probs"]))
     extra = {}
     if entry.training == "online":  # the evaluation's exploration (0 = greedy)
-        extra = {"eval_epsilon": baseline_eval_epsilon(params, method, spec)}
+        extra = {"eval_epsilon": _eval_epsilon(params, method)}
     known = ({f.name for f in dataclasses.fields(net_cls)} | train_fields | set(extra)) - set(net_fixed) - {
         "seed", "device"}
     unknown = sorted(set(section) - known)
     if unknown:
-        raise _fail(params, f"{key}: unknown keys {unknown}; expected some of {sorted(known)}")
-    return {"method": method, "env": env, "model": _fill(params, key, net_cls, section, **net_fixed),
-            "train": _fill(params, key, train_cls, section, **train_fixed), **extra}
+        raise params.error(f"{key}: unknown keys {unknown}; expected some of {sorted(known)}")
+    return BaselineSettings(method, env, fill(params, key, net_cls, section, **net_fixed),
+                            fill(params, key, train_cls, section, **train_fixed), **extra)
 
 
-def compute_settings(params: dict, executor: str | None = None, workers: int | None = None):
-    """Where runs execute (``compute``), with command-line overrides; see :mod:`hnsdt.executor`."""
-    from hnsdt.executor import Compute
+def _fail_probs(params: Params, key: str, values) -> list[float]:
+    if not isinstance(values, list) or not values or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and 0 <= v <= 1 for v in values):
+        raise params.error(f"{key} must be a non-empty list of numbers in [0, 1], got {values!r}")
+    return [float(v) for v in values]
 
-    compute = typed(params).compute
+
+def _eval_epsilon(params: Params, method: str) -> float:
+    eps = (params.baselines.model_extra or {}).get(method, {}).get("eval_epsilon", 0.0)
+    if not isinstance(eps, (int, float)) or isinstance(eps, bool) or not 0 <= eps <= 1:
+        raise params.error(f"baselines.{method}.eval_epsilon must be a number in [0, 1], got {eps!r}")
+    return float(eps)
+
+
+def eval_epsilon(params: Params, method: str) -> float:
+    """The evaluation's exploration of a method: ``baselines.<method>.eval_epsilon`` (online), else 0."""
+    return _eval_epsilon(params, method) if METHODS[method].training == "online" else 0.0
+
+
+def compute_settings(params: Params, executor: str | None = None, workers: int | None = None):
+    """Where runs execute (``compute``), with command-line overrides; see :mod:`hnsdt.compute`."""
+    from hnsdt.compute import Compute
+
+    compute = params.compute
     try:
         return Compute(executor if executor is not None else compute.executor,
                        workers if workers is not None else compute.workers, compute.threads)
     except ValueError as e:
-        raise _fail(params, str(e)) from None
+        raise params.error(str(e)) from None
 
 
-def evaluate_settings(params: dict) -> dict:
-    spec = typed(params)
-    evaluate, train = _section(params, "evaluate", spec), _section(params, "train", spec)
-    if spec.logs.episodes_per_cell > evaluate.episodes:
-        raise _fail(params, f"logs.episodes_per_cell must be in 0..evaluate.episodes, got "
-                    f"{spec.logs.episodes_per_cell}")
-    methods = list(evaluate.methods)
-    trained = set(train.methods) | set(spec.baselines.offline) | set(spec.baselines.online)
+@dataclass(frozen=True)
+class EvaluateSettings:
+    """The paper protocol's evaluation: every method × env × fail_prob × seed."""
+
+    methods: tuple[str, ...]
+    envs: tuple[str, ...]
+    seeds: tuple[int, ...]
+    fail_probs: tuple[float, ...]
+    episodes: int  # per cell, run as one batch
+    device: str
+    log_episodes: int  # recorded episodes per cell (first seed)
+    train_behaviours: tuple[str, ...]  # HNSDT's training episodes (Theorem 2's segment counts)
+    eval_epsilon: dict[str, float]  # per online method
+
+
+def evaluate_settings(params: Params) -> EvaluateSettings:
+    evaluate, train = params.need("evaluate"), params.need("train")
+    if params.logs.episodes_per_cell > evaluate.episodes:
+        raise params.error(f"logs.episodes_per_cell must be in 0..evaluate.episodes, got "
+                           f"{params.logs.episodes_per_cell}")
+    methods = tuple(evaluate.methods)
+    trained = set(train.methods) | set(params.baselines.offline) | set(params.baselines.online)
     untrained = [m for m in methods if METHODS[m].training != "none" and m not in trained]
     if untrained:
-        raise _fail(params, f"evaluate.methods: {untrained} are never trained (add them to train.methods, "
-                    "baselines.offline or baselines.online)")
-    return {
-        "methods": methods, "envs": list(train.envs), "seeds": list(train.seeds),
-        "fail_probs": [float(f) for f in evaluate.fail_probs], "episodes": evaluate.episodes,
-        "device": evaluate.device, "log_episodes": spec.logs.episodes_per_cell,
-        "train_behaviours": tuple(train.behaviours.get(PROPOSED, [])),
-        "eval_epsilon": {m: baseline_eval_epsilon(params, m, spec) for m in methods
-                         if METHODS[m].training == "online"},
-    }
-
-
-def baseline_eval_epsilon(params: dict, method: str, spec: Params | None = None) -> float:
-    eps = ((spec or typed(params)).baselines.model_extra or {}).get(method, {}).get("eval_epsilon", 0.0)
-    if not isinstance(eps, (int, float)) or isinstance(eps, bool) or not 0 <= eps <= 1:
-        raise _fail(params, f"baselines.{method}.eval_epsilon must be a number in [0, 1], got {eps!r}")
-    return float(eps)
-
-
-def theorem_settings(params: dict) -> dict:
-    t = _section(params, "theorems")
-    return {"gamma": t.gamma, "B": t.B, "delta": t.delta, "vc_dimension": t.vc_dimension}
+        raise params.error(f"evaluate.methods: {untrained} are never trained (add them to train.methods, "
+                           "baselines.offline or baselines.online)")
+    return EvaluateSettings(
+        methods=methods, envs=tuple(train.envs), seeds=tuple(train.seeds),
+        fail_probs=tuple(float(f) for f in evaluate.fail_probs), episodes=evaluate.episodes,
+        device=evaluate.device, log_episodes=params.logs.episodes_per_cell,
+        train_behaviours=tuple(train.behaviours.get(PROPOSED, [])),
+        eval_epsilon={m: _eval_epsilon(params, m) for m in methods if METHODS[m].training == "online"})

@@ -23,10 +23,14 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from hnsdt.agents.executor import ExecutorConfig
+from hnsdt.config import (EnvSpec, Params, baseline_settings, eval_epsilon, executor_config, fill,
+                          method_executor, train_settings)
 from hnsdt.envs.layout import Layout
 from hnsdt.methods import METHODS, REFERENCE, resolve
 from hnsdt.methods import method as lookup_method
@@ -45,13 +49,11 @@ class Source:
         return self.layout.name
 
 
-def settings(params: dict):
-    from hnsdt.config import _section
-
-    return _section(params, "generalisation")
+def settings(params: Params):
+    return params.need("generalisation")
 
 
-def training_layouts(params: dict) -> list[Source]:
+def training_layouts(params: Params) -> list[Source]:
     """The training layouts: the family's seeds ``0..train_layouts-1``."""
     from hnsdt.envs.generate import generate
 
@@ -59,7 +61,7 @@ def training_layouts(params: dict) -> list[Source]:
     return [Source("train", generate(g.family, s), g.max_steps) for s in range(g.train_layouts)]
 
 
-def layout_splits(params: dict, evaluated_only: bool = False) -> list[Source]:
+def layout_splits(params: Params, evaluated_only: bool = False) -> list[Source]:
     """Every layout of the experiment, train first; ``evaluated_only`` keeps the evaluated training layouts only."""
     from hnsdt.envs.generate import generate
     from hnsdt.envs.minigrid_adapter import from_minigrid
@@ -84,14 +86,13 @@ def check_sources(sources: list[Source], fail_prob: float) -> None:
         check_usable(src.layout, src.max_steps, fail_prob)
 
 
-def collect_settings(params: dict):
+def collect_settings(params: Params):
     """The collection of the training layouts' episodes: ``collect``'s seed, fps, licence and fail_probs, the
     noisy planner of ``planner``, ``generalisation.episodes_per_layout`` per start, and
     ``generalisation.random_episodes_per_layout`` random walks (the paper's arm's data)."""
-    from hnsdt.config import _section, executor_config
     from hnsdt.data.collect import Behaviour, CollectConfig
 
-    g, collect = settings(params), _section(params, "collect")
+    g, collect = settings(params), params.need("collect")
     behaviours = [Behaviour("noisy_planner", g.episodes_per_layout, start, g.epsilon) for start in ("layout", "random")]
     if g.random_episodes_per_layout:
         behaviours.append(Behaviour("random", g.random_episodes_per_layout, "random"))
@@ -100,7 +101,7 @@ def collect_settings(params: dict):
                          fps=collect.fps, executor=executor_config(params), license=collect.license)
 
 
-def collect(params: dict, root: str | Path, provenance: dict, progress: bool = True) -> Path:
+def collect(params: Params, root: str | Path, provenance: dict, progress: bool = True) -> Path:
     """Collect on every training layout and write one LeRobot dataset with views (atomically)."""
     from tqdm import tqdm
 
@@ -130,10 +131,9 @@ def collect(params: dict, root: str | Path, provenance: dict, progress: bool = T
                          view_radius=g.view_radius)
 
 
-def network_configs(params: dict, method: str, seed: int):
+def network_configs(params: Params, method: str, seed: int):
     """``(view network config, training config)`` of one method and seed. The network is sized for every layout
     of the experiment (the largest target offset, the longest episode)."""
-    from hnsdt.config import _fail, baseline_settings, train_settings, typed
     from hnsdt.models.view import view_config
 
     g = settings(params)
@@ -142,44 +142,41 @@ def network_configs(params: dict, method: str, seed: int):
         raise ValueError(f"generalisation: {method} has no network that reads views")
     sources = layout_splits(params)
     lay = sources[0].layout
-    env = {"layout": lay, "max_steps": g.max_steps, "id": f"hnsdt/generated-{g.family}"}
+    env = EnvSpec(g.family, f"hnsdt/generated-{g.family}", lay, g.max_steps)
     view_cls = resolve(entry.view_network).config_class
     if entry.stage == "train":  # a decision transformer: `train` and `models.<family>`
-        ts, models = train_settings(params), typed(params).models
+        ts, models = train_settings(params), params.models
         if g.family not in models:
-            raise _fail(params, f"missing key models.{g.family} (the decision transformers' size on the "
-                        f"generalisation family {g.family})")
+            raise params.error(f"missing key models.{g.family} (the decision transformers' size on the "
+                               f"generalisation family {g.family})")
         max_offset = max(max(s.layout.shape) for s in sources) - 1  # targets relative to the agent
         try:
             cfg = view_config(entry.condition, lay.n_flags, g.view_radius, max_offset,
-                              max_timestep=max(s.max_steps for s in sources), dropout=typed(params).train.dropout,
+                              max_timestep=max(s.max_steps for s in sources), dropout=params.train.dropout,
                               **models[g.family].model_dump())
         except ValueError as e:
-            raise _fail(params, f"models.{g.family}: {e}") from None
-        train_cfg = replace(ts["config"], seed=seed, behaviours=ts["behaviours"][method], loss=ts["loss"][method])
-        return cfg, _budget(params, method, train_cfg)
-    bs = baseline_settings(params, method, g.family, seed, env=env)
-    return view_cls(**asdict(bs["model"]), view_radius=g.view_radius), _budget(params, method, bs["train"])
+            raise params.error(f"models.{g.family}: {e}") from None
+        return cfg, _budget(params, method, ts.method_config(method, seed))
+    bs = baseline_settings(params, method, env, seed)
+    return view_cls(**asdict(bs.model), view_radius=g.view_radius), _budget(params, method, bs.train)
 
 
-def _budget(params: dict, method: str, train_cfg):
+def _budget(params: Params, method: str, train_cfg):
     """``train_cfg`` with ``generalisation.budgets.<method>`` applied: each key a field of its training config,
     with the field's type."""
-    from hnsdt.config import _fail, _fill
-
     key, budget = f"generalisation.budgets.{method}", settings(params).budgets.get(method, {})
     allowed = set(vars(train_cfg)) - {"seed", "device", "behaviours"}
     unknown = sorted(set(budget) - allowed)
     if unknown:
-        raise _fail(params, f"{key}: unknown key {unknown[0]}; expected one of {sorted(allowed)}")
+        raise params.error(f"{key}: unknown key {unknown[0]}; expected one of {sorted(allowed)}")
     fixed = {k: v for k, v in vars(train_cfg).items() if k not in budget}
-    return _fill(params, key, type(train_cfg), budget, **fixed)  # (types checked as for baselines.<method>)
+    return fill(params, key, type(train_cfg), budget, **fixed)  # (types checked as for baselines.<method>)
 
 
-def plan_runs(params: dict, method: str, dataset: str | Path) -> list[tuple]:
-    """One task per seed, in the form :func:`hnsdt.training.train_run` runs."""
-    from hnsdt.config import method_executor
+def plan_runs(params: Params, method: str, dataset: str | Path) -> list:
+    """One :class:`hnsdt.training.TrainTask` per seed."""
     from hnsdt.data.windows import load_frames
+    from hnsdt.training import TrainTask
 
     g = settings(params)
     if method not in g.learned:
@@ -205,7 +202,7 @@ def plan_runs(params: dict, method: str, dataset: str | Path) -> list[tuple]:
     if not online and wanted and not np.isin(data.policy, wanted).any():
         raise ValueError(f"{method} learns from {wanted} episodes and {dataset} holds none; set "
                          "generalisation.random_episodes_per_layout > 0 (random walks) and collect again")
-    return [(method, seed, net_cfg, replace(train_cfg, seed=seed), data, facts) for seed in g.seeds]
+    return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data, facts) for seed in g.seeds]
 
 
 # -- evaluation -------------------------------------------------------------------------------------------
@@ -223,38 +220,51 @@ def episode_seed(seed: int, layout_index: int) -> int:
     return int(np.random.SeedSequence([seed, layout_index, 7207]).generate_state(1)[0])
 
 
-def evaluate_run(method: str, seed: int, sources: list[Source], fail_probs: list[float], episodes: int,
-                 executor, model, meta: dict, epsilon: float) -> list[dict]:
+@dataclass(frozen=True)
+class LayoutsTask:
+    """One method and seed on every evaluated layout."""
+
+    method: str
+    seed: int
+    sources: tuple[Source, ...]
+    fail_probs: tuple[float, ...]
+    episodes: int  # per layout × fail_prob
+    executor: ExecutorConfig  # its arm's planner
+    model: Any  # None for the symbolic reference
+    meta: dict
+    epsilon: float  # online methods' exploration
+
+
+def evaluate_run(task: LayoutsTask) -> list[dict]:
     """Every layout × fail_prob of one method and seed: one row per episode. A layout's episodes at every
     failure probability run as one batch (copies with their own fail_prob): one agent call per step for all."""
     from hnsdt.agents.rollout import rollout
     from hnsdt.envs.vector import KeyDoorVectorEnv
     from hnsdt.evaluation.evaluate import build_agent
 
-    per_copy = np.repeat(np.asarray(fail_probs, dtype=np.float64), episodes)
+    per_copy = np.repeat(np.asarray(task.fail_probs, dtype=np.float64), task.episodes)
     rows = []
-    for li, src in enumerate(sources):
-        env_seed = episode_seed(seed, li)
-        agent = build_agent(method, src.layout, executor, model, meta, epsilon, env_seed + 1)
+    for li, src in enumerate(task.sources):
+        env_seed = episode_seed(task.seed, li)
+        agent = build_agent(task.method, src.layout, task.executor, task.model, task.meta, task.epsilon, env_seed + 1)
         eps = rollout(KeyDoorVectorEnv(len(per_copy), src.layout, per_copy, src.max_steps), agent, seed=env_seed)
         for i, ep in enumerate(eps):
-            rows.append({"method": method, "seed": seed, "split": src.split, "layout": src.name,
-                         "fail_prob": float(per_copy[i]), "episode": i % episodes, "success": bool(ep.success),
+            rows.append({"method": task.method, "seed": task.seed, "split": src.split, "layout": src.name,
+                         "fail_prob": float(per_copy[i]), "episode": i % task.episodes, "success": bool(ep.success),
                          "steps": ep.length, "reward": round(ep.ret, 6)})
     return rows
 
 
-def evaluate(params: dict, models_root: str | Path, out_dir: str | Path, compute=None,
+def evaluate(params: Params, models_root: str | Path, out_dir: str | Path, compute=None,
              progress: bool = True) -> pd.DataFrame:
     """Run every method × seed on every evaluated layout; write ``episodes.csv`` and ``summary.csv``."""
-    from hnsdt.config import baseline_eval_epsilon, fail_probs, method_executor
-    from hnsdt.models.checkpoint import load_checkpoint
-    from hnsdt.executor import Compute, run_tasks
+    from hnsdt.compute import Compute, run_tasks
     from hnsdt.fileio import atomic_dir
+    from hnsdt.models.checkpoint import load_checkpoint
 
     g = settings(params)
-    fps = fail_probs(params, "evaluate.fail_probs", params["evaluate"]["fail_probs"])
-    sources = layout_splits(params, evaluated_only=True)
+    fps = tuple(float(f) for f in params.need("evaluate").fail_probs)
+    sources = tuple(layout_splits(params, evaluated_only=True))
     check_sources(sources, max(fps))
     methods = [*g.learned, REFERENCE]
     tasks = []
@@ -269,8 +279,8 @@ def evaluate(params: dict, models_root: str | Path, out_dir: str | Path, compute
                 if meta.get("arch") != resolve(METHODS[method].view_network).arch:
                     raise ValueError(f"{path} is not a view model (train it with `python pipeline/generalisation.py "
                                      f"train --method {method}`)")
-                eps = baseline_eval_epsilon(params, method) if METHODS[method].training == "online" else 0.0
-            tasks.append((method, seed, sources, fps, g.episodes, executor, model, meta, eps))
+                eps = eval_epsilon(params, method)
+            tasks.append(LayoutsTask(method, seed, sources, fps, g.episodes, executor, model, meta, eps))
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
     table = pd.DataFrame([row for rows in results for row in rows])
     optimal = {(s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fps}

@@ -11,18 +11,22 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
 
 from hnsdt.data.collect import POLICIES, STARTS
 from hnsdt.data.windows import LOSS_STEPS
 from hnsdt.envs.generate import FAMILIES
-from hnsdt.executor import EXECUTORS
+from hnsdt.compute import EXECUTORS
 from hnsdt.methods import BASELINES, DT_METHODS, LEARNED, METHODS, OFFLINE_BASELINES, ONLINE_BASELINES
 from hnsdt.symbolic.operators import OPERATOR_SETS
 from hnsdt.symbolic.planner import PLAN_MODES
 
 Probability = Annotated[float, Field(ge=0, le=1)]
 PositiveInt = Annotated[int, Field(ge=1)]
+
+
+class ParamsError(ValueError):
+    """A malformed params file; the message names the file and the key."""
 
 
 class Section(BaseModel):
@@ -195,8 +199,12 @@ class TheoremsParams(Section):
 
 
 class Params(Section):
-    """The whole file. A section without defaults may be left out of a file that only some commands read
-    (``hnsdt plan`` needs ``envs`` alone); the command that needs it stops with "missing key <section>"."""
+    """The whole file, validated once (:func:`validate`); every stage takes this object. A section without
+    defaults may be left out of a file that only some commands read (``hnsdt plan`` needs ``envs`` alone):
+    :meth:`need` stops the command that needs it with "missing key <section>"."""
+
+    _source: str = PrivateAttr("params")  # where it came from: every error names it
+    _raw: dict = PrivateAttr(default_factory=dict)  # the mapping as written (the provenance digest hashes it)
 
     envs: dict[str, EnvParams] = Field(min_length=1)
     planner: PlannerParams = PlannerParams()
@@ -211,20 +219,45 @@ class Params(Section):
     generalisation: GeneralisationParams | None = None
 
 
+    @property
+    def source(self) -> str:
+        return self._source
+
+    @property
+    def raw(self) -> dict:
+        """The file's mapping as written, before defaults: what :func:`hnsdt.provenance.params_digest` hashes."""
+        return self._raw
+
+    def error(self, msg: str) -> ParamsError:
+        """One line naming the params file: ``<source>: msg``."""
+        return ParamsError(f"{self._source}: {msg}")
+
+    def need(self, name: str):
+        """A section that the running command needs (and a partial params file may lack)."""
+        section = getattr(self, name)
+        if section is None:
+            raise self.error(f"missing key {name}")
+        return section
+
+
 SECTIONS = tuple(Params.model_fields)
 
 
 def validate(raw: Any, source: str = "params") -> Params:
-    """The typed params, or a ``ValueError`` of one line naming ``source`` and the first offending key."""
+    """The typed params, or a :class:`ParamsError` of one line naming ``source`` and the first offending key."""
+    import copy
+
     try:
-        return Params.model_validate(raw)
+        params = Params.model_validate(raw)
     except ValidationError as e:
         err = e.errors()[0]
         key = ".".join(str(part) for part in err["loc"])
         if err["type"] == "extra_forbidden":
-            raise ValueError(f"{source}: unknown key {key}") from None
+            raise ParamsError(f"{source}: unknown key {key}") from None
         if err["type"] == "missing":
-            raise ValueError(f"{source}: missing key {key}") from None
+            raise ParamsError(f"{source}: missing key {key}") from None
         message = err["msg"].removeprefix("Value error, ")
         got = "" if err["type"] == "value_error" else f", got {err['input']!r}"  # (its message says it)
-        raise ValueError(f"{source}: {key}: {message}{got}") from None
+        raise ParamsError(f"{source}: {key}: {message}{got}") from None
+    params._source, params._raw = source, copy.deepcopy(raw)
+    return params

@@ -24,7 +24,6 @@ def git_revision(cwd: str | Path = ".") -> str:
     return rev + ("-dirty" if dirty else "")
 
 
-def params_digest(params: dict) -> str:
-    """16 hex digits of the params' canonical JSON (keys starting with ``_`` are bookkeeping, left out)."""
-    clean = {k: v for k, v in params.items() if not k.startswith("_")}
-    return hashlib.sha256(json.dumps(clean, sort_keys=True).encode()).hexdigest()[:16]
+def params_digest(params) -> str:
+    """16 hex digits of the canonical JSON of the params file as written (:attr:`hnsdt.params.Params.raw`)."""
+    return hashlib.sha256(json.dumps(params.raw, sort_keys=True).encode()).hexdigest()[:16]

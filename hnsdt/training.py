@@ -1,31 +1,45 @@
 """Training runs of the learned methods, one task per env × method × seed (stages `train`, `train_offline`,
-`train_online`).
+`train_online`, `train_generalisation`).
 
-:func:`plan_runs` reads the params and the data once and returns one self-contained task per seed;
-:func:`train_run` is the task: it trains and returns the model and its facts, touching no file, so any
-executor (:mod:`hnsdt.executor`) can run it; :func:`train_all` runs the tasks and writes the checkpoints and
+:func:`plan_runs` reads the params and the data once and returns one self-contained :class:`TrainTask` per
+seed; :func:`train_run` is the task: it trains and returns the model and its facts, touching no file, so any
+executor (:mod:`hnsdt.compute`) can run it; :func:`train_all` runs the tasks and writes the checkpoints and
 curves.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from hnsdt.config import (EnvSpec, Params, baseline_settings, env_spec, method_executor, model_config,
+                          train_settings)
 from hnsdt.methods import METHODS, network_for, resolve
 
 
-def plan_runs(params: dict, env: str, method: str, seeds: list[int], dataset: Path) -> list[tuple]:
-    """One ``(method, seed, model_cfg, train_cfg, data, facts)`` per seed: ``data`` is the dataset's frames
-    (offline methods) or ``(layout, max_steps)`` (online ones); ``facts`` go into the checkpoint."""
-    from hnsdt.config import baseline_lists, baseline_settings, model_config, train_settings
+@dataclass(frozen=True)
+class TrainTask:
+    """One seed of one method: everything its trainer needs, data included."""
 
+    method: str
+    seed: int
+    model_cfg: Any  # the network's config
+    train_cfg: Any  # the trainer's config
+    data: Any  # offline: the dataset's frames; online: (layout or layouts, max_steps)
+    facts: dict  # what goes into the checkpoint besides the configs
+    progress: bool = False  # a progress bar (when it runs in the stage's process)
+    split: bool = False  # stop half-way and hand back the state (seeds that share workers)
+    state: Any = None  # where a split run continues from
+
+
+def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: Path) -> list[TrainTask]:
+    """One task per seed, on ``envs.<env>`` and its dataset (offline methods) or environment (online ones)."""
     training = METHODS[method].training
     frames = None
     if training == "dataset":
-        from hnsdt.config import method_executor
         from hnsdt.data.windows import load_frames
 
         # read once, shipped to every seed's task, with the sub-goal labels of the method's operators
@@ -33,38 +47,34 @@ def plan_runs(params: dict, env: str, method: str, seeds: list[int], dataset: Pa
     runs = []
     if METHODS[method].stage == "train":  # a decision transformer: knobs under `train` and `models`
         ts = train_settings(params)
-        if method not in ts["methods"]:
-            raise ValueError(f"method {method!r} is not in train.methods {ts['methods']}")
+        if method not in ts.methods:
+            raise ValueError(f"method {method!r} is not in train.methods {list(ts.methods)}")
         model_cfg = model_config(params, env, METHODS[method].condition)
         if model_cfg.condition == "subgoal":
-            _check_operator_coverage(frames, params, env, method, ts["behaviours"][method])
+            _check_operator_coverage(frames, params, env_spec(params, env), method, ts.behaviours[method])
         starts = np.unique(frames.episode_start)
         facts = {"dataset": str(dataset), "target_return": float(frames.returns_to_go[starts].max())}  # pure DT's
-        for seed in seeds:
-            cfg = replace(ts["config"], seed=seed, behaviours=ts["behaviours"][method], loss=ts["loss"][method])
-            runs.append((method, seed, model_cfg, cfg, frames, facts))
-        return runs
+        return [TrainTask(method, seed, model_cfg, ts.method_config(method, seed), frames, facts) for seed in seeds]
     kind = "offline" if training == "dataset" else "online"  # a baseline: knobs under `baselines.<method>`
-    listed = baseline_lists(params)[kind]
+    listed = getattr(params.baselines, kind)
     if method not in listed:
-        raise ValueError(f"method {method!r} is not in baselines.{kind} {listed}")
+        raise ValueError(f"method {method!r} is not in baselines.{kind} {list(listed)}")
     for seed in seeds:
         bs = baseline_settings(params, method, env, seed)
         if kind == "offline":
             data, facts = frames, {"dataset": str(dataset)}
         else:
-            data, facts = (bs["env"]["layout"], bs["env"]["max_steps"]), {}
-        runs.append((method, seed, bs["model"], bs["train"], data, facts))
+            data, facts = (bs.env.layout, bs.env.max_steps), {}
+        runs.append(TrainTask(method, seed, bs.model, bs.train, data, facts))
     return runs
 
 
-def _check_operator_coverage(frames, params: dict, env: str, method: str, behaviours) -> None:
+def _check_operator_coverage(frames, params: Params, env: EnvSpec, method: str, behaviours) -> None:
     """Every operator the method's planner can hand its DT must have at least one training segment (Theorem 2's
     m ≥ 1); a dataset too small for that is an error naming the missing operators, before any training."""
-    from hnsdt.config import env_settings, method_executor
     from hnsdt.symbolic.subgoals import NAME_TO_ID
 
-    layout = env_settings(params, env)["layout"]
+    layout = env.layout
     names = ([f"PickKey({k})" for k in layout.keys] + [f"OpenDoor({d})" for d in layout.doors]
              + [f"PickItem({i})" for i in layout.items])
     if method_executor(params, method).operators == "move":
@@ -76,57 +86,56 @@ def _check_operator_coverage(frames, params: dict, env: str, method: str, behavi
     present = set(np.unique(frames.subgoals[used]).tolist())
     missing = [name for name in names if NAME_TO_ID[name] not in present]
     if missing:
-        raise ValueError(f"{method} on {env}: the training episodes (behaviours {list(behaviours) or 'all'}) give no "
-                         f"segment of {', '.join(missing)}; collect more episodes of those behaviours "
+        raise ValueError(f"{method} on {env.name}: the training episodes (behaviours {list(behaviours) or 'all'}) "
+                         f"give no segment of {', '.join(missing)}; collect more episodes of those behaviours "
                          "(collect.behaviours in params.yaml)")
 
 
-def train_run(method: str, seed: int, model_cfg, train_cfg, data, facts: dict, progress: bool = False,
-              split: bool = False, state=None):
-    """Train one seed: ``(model, checkpoint facts, curve)``. With ``split``, it stops half-way (half its epochs,
-    or half its env steps) and returns :class:`~hnsdt.executor.Continue` with its state (a
+def train_run(task: TrainTask):
+    """Train one seed: ``(model, checkpoint facts, curve)``. With ``task.split``, it stops half-way (half its
+    epochs, or half its env steps) and returns :class:`~hnsdt.compute.Continue` with its state (a
     :class:`~hnsdt.models.fit.FitState` or a paused :class:`~hnsdt.agents.baselines.online.OnlineRun`): the
     executor queues the second half behind the other seeds' first halves, so 5 seeds on 2 workers take 2.5
     seed-times, and the weights are the same bytes as in one go (tested)."""
-    from hnsdt.executor import Continue
+    from hnsdt.compute import Continue
 
+    method, seed, model_cfg, train_cfg = task.method, task.seed, task.model_cfg, task.train_cfg
     online = METHODS[method].training == "online"
     half = (train_cfg.env_steps if online else train_cfg.epochs) // 2
     trainer = resolve(METHODS[method].trainer)
-    args = data if online else (data,)  # online: (layout(s), max_steps)
-    out = trainer(*args, model_cfg, train_cfg, progress=progress, desc=f"{method} seed {seed}",
-                  network=network_for(method, model_cfg), state=state,
-                  stop_after=(half or None) if split else None)
+    args = task.data if online else (task.data,)  # online: (layout(s), max_steps)
+    out = trainer(*args, model_cfg, train_cfg, progress=task.progress, desc=f"{method} seed {seed}",
+                  network=network_for(method, model_cfg), state=task.state,
+                  stop_after=(half or None) if task.split else None)
     if not isinstance(out, tuple):  # paused half-way
-        return Continue((method, seed, model_cfg, train_cfg, data, facts, progress, False, out))
+        return Continue(replace(task, split=False, state=out))
     model, curve, usage = out
     model.cpu()
-    return model, {"seed": seed, **facts, "train": asdict(train_cfg), "usage": usage, "curve": curve}, curve
+    return model, {"seed": seed, **task.facts, "train": asdict(train_cfg), "usage": usage, "curve": curve}, curve
 
 
-def train_all(runs: list[tuple], env: str, out: Path, curves: Path, compute, progress: bool = True) -> None:
+def train_all(runs: list[TrainTask], env: str, out: Path, curves: Path, compute, progress: bool = True) -> None:
     """Run every seed's task on ``compute`` and write ``out/seedK/`` checkpoints and ``curves/seedK.csv``,
     each folder complete or absent."""
     import pandas as pd
 
-    from hnsdt.executor import run_tasks
+    from hnsdt.compute import run_tasks
     from hnsdt.fileio import atomic_dir
     from hnsdt.models.checkpoint import save_checkpoint
 
     inline = compute.executor == "local" and compute.local_workers(len(runs)) == 1
-    method = runs[0][0]
+    method = runs[0].method
     # seeds split in halves where they share workers (in one process a split would only cost a model rebuild)
-    results = run_tasks(train_run, [(*r, progress and inline, not inline) for r in runs], compute,
-                        desc=f"train {env} {method}", progress=progress and not inline)
+    tasks = [replace(r, progress=progress and inline, split=not inline) for r in runs]
+    results = run_tasks(train_run, tasks, compute, desc=f"train {env} {method}", progress=progress and not inline)
     with atomic_dir(out) as staging, atomic_dir(curves) as curve_staging:
         staging.mkdir()
         curve_staging.mkdir()
         for run, (model, facts, curve) in zip(runs, results):
-            seed = run[1]
-            save_checkpoint(model, staging / f"seed{seed}", {"env": env, "method": method, **facts})
-            pd.DataFrame(curve).to_csv(curve_staging / f"seed{seed}.csv", index=False)
+            save_checkpoint(model, staging / f"seed{run.seed}", {"env": env, "method": method, **facts})
+            pd.DataFrame(curve).to_csv(curve_staging / f"seed{run.seed}.csv", index=False)
             usage = ", ".join(f"{k} {v}" for k, v in facts["usage"].items())
-            print(f"trained {method} on {env}, seed {seed}: {usage}; final {_last_metric(curve)}", flush=True)
+            print(f"trained {method} on {env}, seed {run.seed}: {usage}; final {_last_metric(curve)}", flush=True)
 
 
 def _last_metric(curve: list[dict]) -> str:

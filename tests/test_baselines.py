@@ -13,6 +13,7 @@ from hnsdt.agents.baselines.options import OptionsAgent, train_options
 from hnsdt.agents.baselines.recurrent import RecurrentAgent, RecurrentTrainConfig, episode_batch, train_recurrent
 from hnsdt.agents.rollout import RandomAgent
 from hnsdt.config import ParamsError, baseline_settings, evaluate_settings, load_params
+from hnsdt.params import validate
 from hnsdt.data.windows import frames_from_arrays
 from hnsdt.envs import KeyDoorVectorEnv, load_layout
 from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint
@@ -48,18 +49,18 @@ def _expert_frames(layout, n=48, fail_prob=0.1, seed=0):
 
 
 def test_default_sizes_match_the_paper(params):
-    lstm = RecurrentPolicy(baseline_settings(params, "lstm_hier", "keydoor", 0)["model"])
+    lstm = RecurrentPolicy(baseline_settings(params, "lstm_hier", "keydoor", 0).model)
     assert isinstance(lstm.rnn, torch.nn.LSTM) and (lstm.rnn.num_layers, lstm.rnn.hidden_size) == (3, 256)
     assert lstm.cfg.hierarchical and lstm.subgoal_head.out_features > 1  # high-level head over sub-goal ids
-    gru = RecurrentPolicy(baseline_settings(params, "gru", "keydoor", 0)["model"])
+    gru = RecurrentPolicy(baseline_settings(params, "gru", "keydoor", 0).model)
     assert isinstance(gru.rnn, torch.nn.GRU) and (gru.rnn.num_layers, gru.rnn.hidden_size) == (2, 128)
     assert not gru.cfg.hierarchical and not hasattr(gru, "subgoal_head")
-    oc = OptionCritic(baseline_settings(params, "options", "keydoor", 0)["model"])
+    oc = OptionCritic(baseline_settings(params, "options", "keydoor", 0).model)
     assert oc.q_head.out_features == oc.termination_head.out_features == 8
     assert oc.policy_head.out_features == 8 * 5
     dqn = baseline_settings(params, "dqn", "multikeydoor", 0)
-    assert dqn["train"].buffer_size > 0 and dqn["train"].target_period > 0
-    assert dqn["train"].env_steps == params["baselines"]["dqn"]["env_steps"]["multikeydoor"]
+    assert dqn.train.buffer_size > 0 and dqn.train.target_period > 0
+    assert dqn.train.env_steps == params.raw["baselines"]["dqn"]["env_steps"]["multikeydoor"]
 
 
 def test_recurrent_agent_step_by_step_equals_the_training_forward(keydoor):
@@ -84,7 +85,7 @@ def test_recurrent_agent_step_by_step_equals_the_training_forward(keydoor):
 def test_recurrent_baselines_learn_case1(keydoor, params, random_success, method):
     settings = baseline_settings(params, method, "keydoor", 0)
     cfg = RecurrentTrainConfig(epochs=40, batch_size=16, lr=2e-3, seed=0)
-    model, curve, usage = train_recurrent(_expert_frames(keydoor), settings["model"], cfg, progress=False)
+    model, curve, usage = train_recurrent(_expert_frames(keydoor), settings.model, cfg, progress=False)
     assert curve[-1]["loss"] < curve[0]["loss"]
     assert usage["dataset_episodes"] == 48 and usage["dataset_frames"] > 48 * 13
     success = _success(keydoor, RecurrentAgent(model))
@@ -95,8 +96,8 @@ def test_recurrent_baselines_learn_case1(keydoor, params, random_success, method
 def test_dqn_learns_case1(keydoor, params, random_success):
     """The default Case 1 configuration (params.yaml), evaluated at fail_prob 0."""
     settings = baseline_settings(params, "dqn", "keydoor", 0)
-    model, curve, usage = train_dqn(keydoor, 100, settings["model"], settings["train"], progress=False)
-    assert usage["env_steps"] == settings["train"].env_steps and usage["gradient_steps"] > 3000
+    model, curve, usage = train_dqn(keydoor, 100, settings.model, settings.train, progress=False)
+    assert usage["env_steps"] == settings.train.env_steps and usage["gradient_steps"] > 3000
     assert curve[-1]["success"] > curve[0]["success"]
     assert _success(keydoor, DQNAgent(model)) >= 0.9 > random_success + 0.5
 
@@ -112,8 +113,8 @@ def test_options_learns_to_cross_a_room(params):
     settings = baseline_settings(params, "options", "keydoor", 0)
     successes = []
     for seed in range(3):
-        cfg = replace(settings["train"], env_steps=16_000, learning_starts=500, seed=seed)
-        model, curve, usage = train_options(room, 20, replace(settings["model"], n_flags=room.n_flags), cfg, progress=False)
+        cfg = replace(settings.train, env_steps=16_000, learning_starts=500, seed=seed)
+        model, curve, usage = train_options(room, 20, replace(settings.model, n_flags=room.n_flags), cfg, progress=False)
         assert usage["env_steps"] == 16_000 and curve[-1]["success"] > curve[0]["success"]
         successes.append(_success(room, OptionsAgent(model, seed=0), horizon=20))
     assert random_success < 0.1
@@ -152,9 +153,10 @@ def test_options_agent_is_reproducible_with_its_seed(keydoor):
     (lambda p: p["baselines"].update(online=["dqn"]), "['options'] are never trained"),
 ])
 def test_bad_baseline_params_give_one_clear_error(params, edit, message):
-    p = copy.deepcopy(params)
-    edit(p)
+    raw = copy.deepcopy(params.raw)
+    edit(raw)
     with pytest.raises(ParamsError, match=None) as err:
+        p = validate(raw)
         for method in ("dqn", "gru", "options"):
             baseline_settings(p, method, "multikeydoor", 0)
         evaluate_settings(p)

@@ -11,7 +11,7 @@ from hnsdt.agents import SymbolicAgent, rollout
 from hnsdt.agents.baselines.recurrent import RecurrentTrainConfig, train_recurrent
 from hnsdt.data.windows import frames_from_arrays
 from hnsdt.envs import KeyDoorVectorEnv
-from hnsdt.executor import Compute, Continue, run_tasks
+from hnsdt.compute import Compute, Continue, run_tasks
 from hnsdt.models.dt import DTConfig
 from hnsdt.models.fit import FitState
 from hnsdt.models.recurrent import RecurrentConfig
@@ -86,8 +86,9 @@ def test_an_online_run_paused_and_continued_elsewhere_is_the_run_in_one_go(keydo
         assert torch.equal(a, b), name
 
 
-def _countdown(label: str, parts: int):
+def _countdown(task: tuple[str, int]):
     """A task in ``parts`` parts: it hands back its remaining parts until the last one."""
+    label, parts = task
     return Continue((label, parts - 1)) if parts > 1 else f"{label} done"
 
 

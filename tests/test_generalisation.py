@@ -7,6 +7,7 @@ import pytest
 
 from hnsdt.envs import KeyDoorVectorEnv, LayoutError, load_layout
 from hnsdt.envs.generate import FAMILIES, FamilySizes, check_usable, generate, write_layout
+from hnsdt.params import validate
 from hnsdt.envs.observation import (DOOR_CLOSED, DOOR_OPEN, EXIT, FLOOR, ITEM, KEY, OUTSIDE, WALL, full_view,
                                     local_view)
 
@@ -299,10 +300,10 @@ def test_the_dataset_over_generated_layouts_stores_each_frames_view(tmp_path):
     from hnsdt.models.view import view_states
 
     params = _tiny_generalisation_params(tmp_path)
-    root = gen.collect(params, tmp_path / "ds", {"git_revision": "test"}, progress=False)
+    root = gen.collect(validate(params), tmp_path / "ds", {"git_revision": "test"}, progress=False)
     ds = open_dataset(root)
     cols = ds.hf_dataset.with_format("numpy")[:]
-    layouts = [s.layout for s in gen.layout_splits(params) if s.split == "train"]
+    layouts = [s.layout for s in gen.layout_splits(validate(params)) if s.split == "train"]
     assert sorted(set(np.ravel(cols["layout_index"]).tolist())) == list(range(len(layouts)))
     for state, view, li in zip(cols["observation.state"], cols["observation.view"], np.ravel(cols["layout_index"])):
         assert (view == local_view(layouts[li], state[None], 2).ravel()).all()
@@ -321,20 +322,20 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     import pandas as pd
 
     from hnsdt import generalisation as gen
-    from hnsdt.executor import Compute
+    from hnsdt.compute import Compute
     from hnsdt.models.checkpoint import save_checkpoint
     from hnsdt.training import train_run
 
     params = _tiny_generalisation_params(tmp_path)
     g = params["generalisation"]
     g.update(methods=["hnsdt"], baselines=["gru", "dqn"])
-    dataset = gen.collect(params, tmp_path / "ds", {}, progress=False)
+    dataset = gen.collect(validate(params), tmp_path / "ds", {}, progress=False)
     for method in g["methods"] + g["baselines"]:
-        (run,) = gen.plan_runs(params, method, dataset)
-        model, facts, _ = train_run(*run)
+        (run,) = gen.plan_runs(validate(params), method, dataset)
+        model, facts, _ = train_run(run)
         assert type(model).__name__.startswith("View")
         save_checkpoint(model, tmp_path / "models" / method / "seed0", {"method": method, **facts})
-    table = gen.evaluate(params, tmp_path / "models", tmp_path / "results", Compute(workers=1), progress=False)
+    table = gen.evaluate(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1), progress=False)
     assert set(table.method) == {"hnsdt", "gru", "dqn", "symbolic"}
     assert set(table.split) == {"train", "heldout", "minigrid"}
     assert len(table) == 4 * 3 * 2 * 2
@@ -342,12 +343,10 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     summary = pd.read_csv(tmp_path / "results/summary.csv")
     assert len(summary) == 4 * 3 * 2 and summary.success_mean.between(0, 1).all()
     with pytest.raises(ValueError, match="not in generalisation.methods"):
-        gen.plan_runs(params, "options", dataset)
+        gen.plan_runs(validate(params), "options", dataset)
 
 
 def test_a_bad_generalisation_knob_is_one_line_naming_it(tmp_path):
-    from hnsdt.params import validate
-
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"]["family"] = "maze"
     with pytest.raises(ValueError, match=r"^params: generalisation.family: Input should be 'keydoor' or"):
@@ -363,16 +362,16 @@ def test_a_methods_budget_replaces_the_protocols_knobs_and_a_bad_one_is_named(tm
 
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"]["budgets"] = {"gru": {"epochs": 3, "lr": 1}, "dqn": {"env_steps": 123}}
-    _, train_cfg = gen.network_configs(params, "gru", 0)
+    _, train_cfg = gen.network_configs(validate(params), "gru", 0)
     assert (train_cfg.epochs, train_cfg.lr) == (3, 1.0)
-    assert gen.network_configs(params, "dqn", 1)[1].env_steps == 123
-    assert gen.network_configs(params, "lstm_hier", 0)[1].epochs == params["baselines"]["lstm_hier"]["epochs"]
+    assert gen.network_configs(validate(params), "dqn", 1)[1].env_steps == 123
+    assert gen.network_configs(validate(params), "lstm_hier", 0)[1].epochs == params["baselines"]["lstm_hier"]["epochs"]
     params["generalisation"]["budgets"] = {"gru": {"epoch": 3}}
     with pytest.raises(ParamsError, match=r"generalisation.budgets.gru: unknown key epoch; expected one of"):
-        gen.network_configs(params, "gru", 0)
+        gen.network_configs(validate(params), "gru", 0)
     params["generalisation"]["budgets"] = {"gru": {"epochs": "3"}}
     with pytest.raises(ParamsError, match=r"generalisation.budgets.gru.epochs must be int, got '3'"):
-        gen.network_configs(params, "gru", 0)
+        gen.network_configs(validate(params), "gru", 0)
 
 
 def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operators(tmp_path):
@@ -380,7 +379,7 @@ def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operator
     paper's Move labels and is evaluated under the paper's planner (BFS over Move operators); without random
     walks its training stops with one line naming the knob."""
     from hnsdt import generalisation as gen
-    from hnsdt.executor import Compute
+    from hnsdt.compute import Compute
     from hnsdt.models.checkpoint import save_checkpoint
     from hnsdt.symbolic.subgoals import NAME_TO_ID
     from hnsdt.training import train_run
@@ -388,18 +387,18 @@ def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operator
     params = _tiny_generalisation_params(tmp_path)
     g = params["generalisation"]
     g.update(methods=["hnsdt_paper"], baselines=[])
-    planner_only = gen.collect(params, tmp_path / "planner", {}, progress=False)
+    planner_only = gen.collect(validate(params), tmp_path / "planner", {}, progress=False)
     no_walks = r"hnsdt_paper learns from \['random'\] episodes and .*generalisation\.random_episodes_per_layout"
     with pytest.raises(ValueError, match=no_walks):
-        gen.plan_runs(params, "hnsdt_paper", planner_only)
+        gen.plan_runs(validate(params), "hnsdt_paper", planner_only)
     g["random_episodes_per_layout"] = 2
-    dataset = gen.collect(params, tmp_path / "ds", {}, progress=False)
-    (run,) = gen.plan_runs(params, "hnsdt_paper", dataset)
-    frames = run[4]
+    dataset = gen.collect(validate(params), tmp_path / "ds", {}, progress=False)
+    (run,) = gen.plan_runs(validate(params), "hnsdt_paper", dataset)
+    frames = run.data
     walks = frames.policy == "random"
     assert walks.sum() > 0 and (~walks).sum() > 0
     assert NAME_TO_ID["Move"] in set(frames.subgoals[walks].tolist())  # the paper's labels, not GoTo
-    model, facts, _ = train_run(*run)
+    model, facts, _ = train_run(run)
     save_checkpoint(model, tmp_path / "models/hnsdt_paper/seed0", {"method": "hnsdt_paper", **facts})
-    table = gen.evaluate(params, tmp_path / "models", tmp_path / "results", Compute(workers=1), progress=False)
+    table = gen.evaluate(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1), progress=False)
     assert set(table.method) == {"hnsdt_paper", "symbolic"} and set(table.split) == {"train", "heldout", "minigrid"}

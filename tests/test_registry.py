@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import copy
 from pathlib import Path
 
 import pytest
@@ -56,8 +57,9 @@ def tiny(tmp_path_factory):
     """Params at a tiny budget and a small Case 1 dataset (random walks cover every operator, Move included)."""
     from hnsdt.config import collect_config, load_params
     from hnsdt.data.collect import collect_dataset
+    from hnsdt.params import validate
 
-    params = load_params(PACKAGE.parent / "params.yaml")
+    params = copy.deepcopy(load_params(PACKAGE.parent / "params.yaml").raw)
     params["collect"]["fail_probs"] = [0.1]
     params["collect"]["behaviours"] = [{"policy": "random", "episodes": 30, "start": "random"},
                                        {"policy": "noisy_planner", "episodes": 6, "start": "random", "epsilon": 0.1}]
@@ -66,6 +68,7 @@ def tiny(tmp_path_factory):
         params["baselines"][name].update(epochs=1, max_steps=2)
     for name in params["baselines"]["online"]:
         params["baselines"][name].update(env_steps=64, learning_starts=32)
+    params = validate(params)
     dataset = tmp_path_factory.mktemp("data") / "keydoor"
     collect_dataset(collect_config(params, "keydoor"), dataset, repo_id="local/keydoor", progress=False)
     return params, dataset
@@ -77,21 +80,21 @@ def test_every_method_trains_and_acts_through_its_registry_entry(tiny, name):
     architecture and agent, then a batch of evaluation episodes. (Whether it learns is tested elsewhere.)"""
     import json
 
-    from hnsdt.config import env_settings, method_executor
+    from hnsdt.config import env_spec, method_executor
     from hnsdt.evaluation.evaluate import Cell, build_agent, run_cell
     from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint
     from hnsdt.training import plan_runs, train_run
 
     params, dataset = tiny
-    env = env_settings(params, "keydoor")
+    env = env_spec(params, "keydoor")
     model, meta = None, {}
     if METHODS[name].training != "none":
         (run,) = plan_runs(params, "keydoor", name, [0], dataset)
-        model, facts, curve = train_run(*run)
+        model, facts, curve = train_run(run)
         assert curve and facts["usage"]
         path = save_checkpoint(model, dataset.parent / "models" / name, {"method": name, **facts})
         model, meta = load_checkpoint(path)
         assert json.loads((path / "config.json").read_text())["arch"] == resolve(METHODS[name].network).arch
-    agent = build_agent(name, env["layout"], method_executor(params, name), model, meta)
-    episodes = run_cell(Cell(name, "keydoor", 0.1, 0), 0, env["layout"], 20, 3, agent)
+    agent = build_agent(name, env.layout, method_executor(params, name), model, meta)
+    episodes = run_cell(Cell(name, "keydoor", 0.1, 0), 0, env.layout, 20, 3, agent)
     assert len(episodes) == 3 and all(1 <= ep.length <= 20 for ep in episodes)

@@ -1,7 +1,7 @@
 """Evaluation: every method × env × fail_prob × seed, N episodes each, batched over environment copies.
 
-One task per method × env × seed (:func:`evaluate_run`) runs its fail_probs' cells and returns table rows,
-touching no file, so any executor (:mod:`hnsdt.executor`) can run it; :func:`evaluate_all` loads the
+One :class:`EvalTask` per method × env × seed (:func:`evaluate_run`) runs its fail_probs' cells and returns
+table rows, touching no file, so any executor (:mod:`hnsdt.compute`) can run it; :func:`evaluate_all` loads the
 checkpoints, runs the tasks and writes the tables and recordings.
 
 Metrics follow the paper: success rate, mean steps of the successful episodes, mean reward (episode return);
@@ -13,6 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -178,13 +179,13 @@ def summary(table: pd.DataFrame) -> pd.DataFrame:
     return out.fillna({"success_std": 0.0, "steps_std": 0.0, "reward_std": 0.0}).reset_index()
 
 
-def add_optimum(summ: pd.DataFrame, envs: dict[str, dict]) -> pd.DataFrame:
+def add_optimum(summ: pd.DataFrame, envs: dict) -> pd.DataFrame:
     """Attach the exact optimum of each env × fail_prob (value iteration, :mod:`hnsdt.oracle`) and every
     method's ratios to it: success / optimal success, steps / optimal expected steps, and the regret
     V* − V^π in expected return."""
     from hnsdt.oracle import optimum
 
-    opt = {(e, f): optimum(envs[e]["layout"], f, envs[e]["max_steps"]) for e, f in set(zip(summ.env, summ.fail_prob))}
+    opt = {(e, f): optimum(envs[e].layout, f, envs[e].max_steps) for e, f in set(zip(summ.env, summ.fail_prob))}
     out = summ.copy()
     out["opt_success"] = [opt[(e, f)].success for e, f in zip(out.env, out.fail_prob)]
     out["opt_steps"] = [opt[(e, f)].steps for e, f in zip(out.env, out.fail_prob)]
@@ -208,27 +209,48 @@ def metrics_json(summ: pd.DataFrame) -> dict:
     return out
 
 
-def evaluate_run(method: str, env: str, seed: int, fail_probs: list[float], layout: Layout, max_steps: int,
-                 episodes: int, executor: ExecutorConfig, model, meta: dict, epsilon: float, log_episodes: int):
+@dataclass(frozen=True)
+class EvalTask:
+    """One method × env × seed of the evaluation, with its trained model."""
+
+    method: str
+    env: str
+    seed: int
+    fail_probs: tuple[float, ...]
+    layout: Layout
+    max_steps: int
+    episodes: int  # per fail_prob
+    executor: ExecutorConfig  # its arm's planner
+    model: Any  # None for the symbolic method
+    meta: dict  # the checkpoint's facts
+    epsilon: float  # online methods' exploration
+    log_episodes: int  # the first this many episodes of each cell come back whole (recordings)
+
+
+def evaluate_run(task: EvalTask):
     """The cells of one method × env × seed, one per fail_prob: for each, ``(episode rows, segment rows, its
     first log_episodes episodes)``."""
     out = []
-    for fi, fail_prob in enumerate(fail_probs):
-        cell = Cell(method, env, fail_prob, seed)
-        agent = build_agent(method, layout, executor, model, meta, epsilon, cell_seed(cell, fi) + 1)
-        eps = run_cell(cell, fi, layout, max_steps, episodes, agent)
-        out.append((episode_rows(cell, eps, layout, executor), segment_rows(cell, eps, _navigator(layout)),
-                    eps[:log_episodes]))
+    layout = task.layout
+    for fi, fail_prob in enumerate(task.fail_probs):
+        cell = Cell(task.method, task.env, fail_prob, task.seed)
+        agent = build_agent(task.method, layout, task.executor, task.model, task.meta, task.epsilon,
+                            cell_seed(cell, fi) + 1)
+        eps = run_cell(cell, fi, layout, task.max_steps, task.episodes, agent)
+        out.append((episode_rows(cell, eps, layout, task.executor), segment_rows(cell, eps, _navigator(layout)),
+                    eps[:task.log_episodes]))
     return out
 
 
-def evaluate_all(settings: dict, envs: dict[str, dict], executors: dict[str, ExecutorConfig],
-                 models_root: str | Path, out_dir: str | Path, progress: bool = True,
+def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], models_root: str | Path,
+                 out_dir: str | Path, datasets: str | Path, progress: bool = True,
                  recordings_dir: str | Path | None = None,
                  compute=None, provenance: dict | None = None) -> pd.DataFrame:
-    """Run every cell on ``compute``'s executor, write ``episodes.csv``, ``summary.csv``, ``metrics.json``
-    under ``out_dir`` and the episode recordings (of the first seed) under ``recordings_dir`` (default:
-    ``recordings`` beside ``out_dir``), each built in a temporary folder and moved into place when complete.
+    """Run every cell of ``settings`` (:class:`hnsdt.config.EvaluateSettings`) on ``envs`` (name ->
+    :class:`hnsdt.config.EnvSpec`) and ``compute``'s executor, write ``episodes.csv``, ``summary.csv``,
+    ``metrics.json`` under ``out_dir`` and the episode recordings (of the first seed) under ``recordings_dir``
+    (default: ``recordings`` beside ``out_dir``), each built in a temporary folder and moved into place when
+    complete. ``datasets``: the root of the collected datasets (Theorem 2's training segment counts).
 
     The recordings live apart from the tables because rerun stamps every row of an ``.rrd`` with a
     time-based id: the tables are the same bytes on every run, the ``.rrd`` files cannot be.
@@ -237,7 +259,7 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executors: dict[str, Exe
     :func:`hnsdt.config.executor_config`)."""
     import json
 
-    from hnsdt.executor import Compute, run_tasks
+    from hnsdt.compute import Compute, run_tasks
     from hnsdt.fileio import atomic_dir
     from hnsdt.logs import LAYOUT_NAME, record_from_episode, write_layout, write_mcap, write_rrd
 
@@ -246,17 +268,17 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executors: dict[str, Exe
         raise ValueError(f"evaluate_all: no planner settings for arm(s) {sorted(missing)}")
     out = Path(out_dir)
     rec_out = Path(recordings_dir) if recordings_dir is not None else out.parent / "recordings"
-    groups = [(m, e, s) for m in settings["methods"] for e in settings["envs"] for s in settings["seeds"]]
+    groups = [(m, e, s) for m in settings.methods for e in settings.envs for s in settings.seeds]
     tasks, params_count, usage = [], {}, []
     for method, env, seed in groups:
-        model, meta = load_model(models_root, env, method, seed, settings["device"])
+        model, meta = load_model(models_root, env, method, seed, settings.device)
         if model is not None:
             params_count[f"{env}/{method}"] = sum(p.numel() for p in model.parameters())
             usage.append(training_usage(models_root, env, method, seed))
-        log = settings["log_episodes"] if seed == settings["seeds"][0] else 0
-        tasks.append((method, env, seed, settings["fail_probs"], envs[env]["layout"], envs[env]["max_steps"],
-                      settings["episodes"], executors[lookup_method(method).arm], model, meta,
-                      settings.get("eval_epsilon", {}).get(method, 0.0), log))
+        log = settings.log_episodes if seed == settings.seeds[0] else 0
+        tasks.append(EvalTask(method, env, seed, settings.fail_probs, envs[env].layout, envs[env].max_steps,
+                              settings.episodes, executors[lookup_method(method).arm], model, meta,
+                              settings.eval_epsilon.get(method, 0.0), log))
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate", progress=progress)
     with atomic_dir(out) as tmp, atomic_dir(rec_out) as rec_tmp:
         tmp.mkdir()
@@ -264,15 +286,15 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executors: dict[str, Exe
         write_layout(rec_tmp / LAYOUT_NAME)  # Foxglove: Layouts -> Import, then open any .mcap below
         rows, seg_rows = [], []
         cells = dict(zip(groups, results))
-        for method, env, fi, fail_prob, seed in [(m, e, fi, f, s) for m in settings["methods"] for e in settings["envs"]
-                                                 for fi, f in enumerate(settings["fail_probs"])
-                                                 for s in settings["seeds"]]:
+        for method, env, fi, fail_prob, seed in [(m, e, fi, f, s) for m in settings.methods for e in settings.envs
+                                                 for fi, f in enumerate(settings.fail_probs)
+                                                 for s in settings.seeds]:
             cell_rows, cell_segs, logged = cells[(method, env, seed)][fi]
             cell = Cell(method, env, fail_prob, seed)
             for i, ep in enumerate(logged):
                 rel = Path(method) / env / f"fp{fail_prob:g}" / f"seed{seed}" / f"ep{i}"
                 meta = {"method": method, "env": env, "fail_prob": fail_prob, "seed": seed, "episode": i}
-                rec = record_from_episode(cell.episode_id(i), envs[env]["layout"], ep, meta | (provenance or {}))
+                rec = record_from_episode(cell.episode_id(i), envs[env].layout, ep, meta | (provenance or {}))
                 write_rrd(rec_tmp / rel.with_suffix(".rrd"), rec, episode_index=i)
                 write_mcap(rec_tmp / rel.with_suffix(".mcap"), rec)
                 cell_rows[i]["rrd"] = str(Path(rec_out.name) / rel.with_suffix(".rrd"))
@@ -286,8 +308,8 @@ def evaluate_all(settings: dict, envs: dict[str, dict], executors: dict[str, Exe
         table[["rrd", "mcap"]] = table[["rrd", "mcap"]].fillna("")
         table.to_csv(tmp / "episodes.csv", index=False)
         pd.DataFrame(seg_rows).to_csv(tmp / "segments.csv", index=False)
-        counts = [r for e in settings["envs"] for r in training_segment_counts(
-            Path(settings["datasets"]) / e, e, settings["train_behaviours"])]
+        counts = [r for e in settings.envs for r in training_segment_counts(
+            Path(datasets) / e, e, settings.train_behaviours)]
         pd.DataFrame(counts, columns=["env", "operator", "segments"]).to_csv(tmp / "training_segments.csv",
                                                                            index=False)
         pd.DataFrame(usage, columns=["method", "env", "seed", "training", "env_steps", "dataset_frames", "epochs",

@@ -19,6 +19,7 @@ import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
 
 from hnsdt.fileio import atomic_dir  # noqa: E402
+from hnsdt.params import Params  # noqa: E402
 from hnsdt.methods import METHODS, PAPER_ARM, PARADIGMS, PROPOSED  # noqa: E402
 from hnsdt.provenance import git_revision, params_digest  # noqa: E402
 
@@ -67,7 +68,7 @@ def _methods(summ: pd.DataFrame) -> list[str]:
     return [m for m in METHODS if m in present] + sorted(present - set(METHODS))
 
 
-def environment_figure(envs: dict[str, dict], path: Path) -> None:
+def environment_figure(envs: dict, path: Path) -> None:
     """The paper's Figures 2 and 3, drawn from the layout files: walls, keys, doors, items, start and exit."""
     from hnsdt.envs.render import COLOURS, render_rgb, symbol_grid
     from hnsdt.symbolic.abstraction import SymbolicState
@@ -75,7 +76,7 @@ def environment_figure(envs: dict[str, dict], path: Path) -> None:
     px = 40
     fig, axes = plt.subplots(1, len(envs), figsize=(4.4 * len(envs), 5.2), squeeze=False)
     for ax, (name, env) in zip(axes[0], envs.items()):
-        layout = env["layout"]
+        layout = env.layout
         state = SymbolicState.initial(layout).to_observation(layout)
         ax.imshow(render_rgb(layout, state, px))
         for r, row in enumerate(symbol_grid(layout, state)):
@@ -488,21 +489,21 @@ def _largest_informative_d(m: int, K: int, delta: float) -> float:
     return lo
 
 
-def theorem_sections(params: dict, results: Path, summ: pd.DataFrame, episodes: pd.DataFrame) -> tuple[dict, dict]:
+def theorem_sections(params: Params, results: Path, summ: pd.DataFrame, episodes: pd.DataFrame) -> tuple[dict, dict]:
     """The two theorems checked on the measurements: the template's context for their sections (empty when
     the inputs are missing) and their rows for ``theorems.json``."""
-    from hnsdt.config import env_settings, theorem_settings
+    from hnsdt.config import env_spec
     from hnsdt.evaluation.theorems import theorem1, theorem2
     from hnsdt.oracle import optimum
 
-    if not (results / "segments.csv").is_file() or "regret" not in summ or "theorems" not in params:
+    if not (results / "segments.csv").is_file() or "regret" not in summ or params.theorems is None:
         return {}, {}
-    ts = theorem_settings(params)
+    ts = params.theorems.model_dump()
     segments = pd.read_csv(results / "segments.csv")
-    envs = {e: env_settings(params, e) for e in sorted(set(segments.env))}
+    envs = {e: env_spec(params, e) for e in sorted(set(segments.env))}
     counts = pd.read_csv(results / "training_segments.csv")
     n_params = json.loads((results / "model_parameters.json").read_text())
-    v_star = {(env, f): optimum(envs[env]["layout"], f, envs[env]["max_steps"], ts["gamma"]).ret
+    v_star = {(env, f): optimum(envs[env].layout, f, envs[env].max_steps, ts["gamma"]).ret
               for env, f in set(zip(segments.env, segments.fail_prob))}
     t1 = theorem1(segments, episodes, v_star, ts["gamma"], ts["B"])
     t2_parts = []
@@ -565,7 +566,7 @@ def generalisation_figure(table: pd.DataFrame, path: Path) -> None:
     plt.close(fig)
 
 
-def generalisation_context(params: dict, results: Path, figure: Path) -> dict:
+def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
     """The report's unseen-layout section: the figure, the table and per-fail_prob numbers."""
     summ = pd.read_csv(results / "summary.csv")
     layouts = pd.read_csv(results / "layouts.csv")
@@ -587,22 +588,22 @@ def generalisation_context(params: dict, results: Path, figure: Path) -> dict:
         d = d.set_index("fail_prob")
         detail.append(f"| {_label(method)} | {split} | " + " | ".join(
             f"{_fmt(d.success_mean.get(f))} ({_fmt(d.steps_ratio_mean.get(f), '.2f')}×)" for f in fps) + " |")
-    g = params.get("generalisation", {})
+    g = params.generalisation
     counts = layouts.groupby("split", sort=False).layout.nunique()
     def span(v: pd.Series) -> str:
         return f"{v.min()}" if v.min() == v.max() else f"{v.min()}–{v.max()}"
 
     sizes = {s: f"{span(d.rows)} × {span(d.cols)}" for s, d in layouts.groupby("split")}
     return {"generalisation_table": "\n".join(lines), "generalisation_detail": "\n".join(detail),
-            "generalisation_family": g.get("family", "?"), "generalisation_train": g.get("train_layouts", "?"),
-            "generalisation_radius": g.get("view_radius", "?"),
+            "generalisation_family": g.family if g else "?", "generalisation_train": g.train_layouts if g else "?",
+            "generalisation_radius": g.view_radius if g else "?",
             "generalisation_splits": [f"{SPLIT_LABELS.get(s, s)}: {n} ({sizes[s]} cells)" for s, n in counts.items()],
             "generalisation_seeds": int(summ.seeds.max()),
             "generalisation_episodes": int(pd.read_csv(results / "episodes.csv").groupby(
                 ["method", "seed", "layout", "fail_prob"]).size().max())}
 
 
-def write_report(params: dict, results: Path, out: Path, lock_path: str | Path = "dvc.lock",
+def write_report(params: Params, results: Path, out: Path, lock_path: str | Path = "dvc.lock",
                  generalisation: Path | None = None) -> Path:
     """``generalisation``: the unseen-layout experiment's results folder (its section is left out without one)."""
     summary_path = results / "summary.csv"
@@ -613,9 +614,9 @@ def write_report(params: dict, results: Path, out: Path, lock_path: str | Path =
     episodes[["rrd", "mcap"]] = episodes[["rrd", "mcap"]].fillna("")  # recording paths: empty when not recorded
     with atomic_dir(out) as tmp:
         (tmp / "figures").mkdir(parents=True)
-        from hnsdt.config import env_settings
+        from hnsdt.config import env_spec
 
-        layouts = {e: env_settings(params, e) for e in dict.fromkeys(summ.env)}
+        layouts = {e: env_spec(params, e) for e in dict.fromkeys(summ.env)}
         environment_figure(layouts, tmp / "figures" / "environments.png")
         comparison_figure(summ, tmp / "figures" / "comparison.png")
         heatmap_figure(summ, tmp / "figures" / "success_heatmap.png")

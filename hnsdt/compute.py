@@ -1,11 +1,11 @@
 """Where the runs of a stage execute: worker processes on this machine, or a Ray cluster.
 
-A stage hands over independent tasks (one training seed; one method × env × seed of the evaluation), each a
-module-level function with its arguments, data included, that returns a picklable result and touches no
-file. The caller writes every output. Each task sets its own torch thread count (``compute.threads``) and
+A stage hands over independent tasks (one training seed; one method × env × seed of the evaluation): a
+module-level function and one frozen task object each, data included; the function returns a picklable result
+and touches no file. The caller writes every output. Each task sets its own torch thread count (``compute.threads``) and
 results come back in task order, so the outputs are the same bytes whichever executor runs the tasks and
 however many workers share them (tested). A task may also return :class:`Continue` — the rest of its work
-as new arguments — which goes to the back of the queue: a training seed hands back its state half-way, so
+as a new task — which goes to the back of the queue: a training seed hands back its state half-way, so
 that 5 seeds on 2 workers take 2.5 seed-times instead of 3.
 
 * ``local`` (default): a pool of ``workers`` spawned processes (0 = one per core / threads); one worker runs
@@ -43,23 +43,23 @@ class Compute:
 
 @dataclass(frozen=True)
 class Continue:
-    """What a task returns when it has more to do: ``fn(*args)`` is queued behind the waiting tasks, and its
-    result (or further :class:`Continue`) stands for the task's."""
+    """What a task returns when it has more to do: ``fn(task)`` is queued behind the waiting tasks, and its
+    result (or further :class:`Continue`) stands for the first task's."""
 
-    args: tuple
+    task: Any
 
 
-def _call(fn: Callable, threads: int, args: tuple) -> Any:
+def _call(fn: Callable, threads: int, task: Any) -> Any:
     import torch
 
     if torch.get_num_threads() != threads:
         torch.set_num_threads(threads)
-    return fn(*args)
+    return fn(task)
 
 
-def run_tasks(fn: Callable, tasks: list[tuple], compute: Compute = Compute(), desc: str = "runs",
+def run_tasks(fn: Callable, tasks: list, compute: Compute = Compute(), desc: str = "runs",
               progress: bool = True) -> list:
-    """``[fn(*args) for args in tasks]``, computed by ``compute``'s executor; results in task order."""
+    """``[fn(task) for task in tasks]``, computed by ``compute``'s executor; results in task order."""
     from tqdm import tqdm
 
     bar = tqdm(total=len(tasks), desc=desc, unit="run", disable=not progress)
@@ -69,10 +69,10 @@ def run_tasks(fn: Callable, tasks: list[tuple], compute: Compute = Compute(), de
         workers = compute.local_workers(len(tasks))
         if workers == 1:
             out = []
-            for args in tasks:
-                result = _call(fn, compute.threads, args)
+            for task in tasks:
+                result = _call(fn, compute.threads, task)
                 while isinstance(result, Continue):
-                    result = _call(fn, compute.threads, result.args)
+                    result = _call(fn, compute.threads, result.task)
                 out.append(result)
                 bar.update(1)
             return out
@@ -81,7 +81,7 @@ def run_tasks(fn: Callable, tasks: list[tuple], compute: Compute = Compute(), de
 
         # spawn, not fork: a forked child would inherit torch's thread pools from this process.
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            running = {pool.submit(_call, fn, compute.threads, args): i for i, args in enumerate(tasks)}
+            running = {pool.submit(_call, fn, compute.threads, task): i for i, task in enumerate(tasks)}
             out = [None] * len(tasks)
             while running:
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
@@ -89,7 +89,7 @@ def run_tasks(fn: Callable, tasks: list[tuple], compute: Compute = Compute(), de
                     i = running.pop(future)
                     result = future.result()
                     if isinstance(result, Continue):
-                        running[pool.submit(_call, fn, compute.threads, result.args)] = i
+                        running[pool.submit(_call, fn, compute.threads, result.task)] = i
                     else:
                         out[i] = result
                         bar.update(1)
@@ -98,7 +98,7 @@ def run_tasks(fn: Callable, tasks: list[tuple], compute: Compute = Compute(), de
         bar.close()
 
 
-def _run_ray(fn: Callable, tasks: list[tuple], compute: Compute, bar) -> list:
+def _run_ray(fn: Callable, tasks: list, compute: Compute, bar) -> list:
     try:
         import ray
     except ImportError:
@@ -110,14 +110,14 @@ def _run_ray(fn: Callable, tasks: list[tuple], compute: Compute, bar) -> list:
         ray.init(address=os.environ.get("RAY_ADDRESS"), runtime_env={"env_vars": env},
                  include_dashboard=False, log_to_driver=False, configure_logging=False)
     remote = ray.remote(num_cpus=compute.threads)(_call)
-    running = {remote.remote(fn, compute.threads, args): i for i, args in enumerate(tasks)}
+    running = {remote.remote(fn, compute.threads, task): i for i, task in enumerate(tasks)}
     out = [None] * len(tasks)
     while running:
         done, _ = ray.wait(list(running), num_returns=1)
         i = running.pop(done[0])
         result = ray.get(done[0])
         if isinstance(result, Continue):
-            running[remote.remote(fn, compute.threads, result.args)] = i
+            running[remote.remote(fn, compute.threads, result.task)] = i
         else:
             out[i] = result
             bar.update(1)
