@@ -48,8 +48,8 @@ def cmd_plan(args) -> None:
     env_id, layout, _ = _resolve_env(args)
     if args.state:
         obs = np.array([int(v) for v in args.state.split(",")], dtype=np.int64)
-        if len(obs) != 2 + layout.n_flags:
-            raise ValueError(f"--state needs {2 + layout.n_flags} comma-separated integers "
+        if len(obs) != layout.state_size:
+            raise ValueError(f"--state needs {layout.state_size} comma-separated integers "
                              f"({', '.join(layout.state_names)})")
         start = SymbolicState.from_observation(layout, obs)
     else:
@@ -154,7 +154,8 @@ def cmd_report(args) -> None:
     from hnsdt.evaluation.report import write_report
 
     path = write_report(load_params(args.params), Path(args.results), Path(args.out),
-                        generalisation=Path(args.generalisation) if args.generalisation else None)
+                        generalisation=Path(args.generalisation) if args.generalisation else None,
+                        headline=Path(args.headline) if args.headline else None)
     print(f"wrote {path}")
 
 
@@ -349,6 +350,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--generalisation", help="results of the unseen-layout experiment (e.g. generalisation/results); "
                    "without it the report has no such section")
     p.add_argument("--out", default="report")
+    p.add_argument("--headline", help="also write the headline metrics (success per method and split, HNSDT's "
+                   "steps / optimum) as JSON here, e.g. metrics/headline.json")
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("replay", help="find or render the recording of an episode (.rrd for rerun, .mcap for "

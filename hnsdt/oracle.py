@@ -47,7 +47,7 @@ class MDP:
         codes = self._codes(self.states)
         order = np.argsort(codes)
         self.succ = order[np.searchsorted(codes[order], self._codes(nxt))].reshape(n, N_ACTIONS)
-        items = self.states[:, 2 + len(layout.keys) + len(layout.doors):]
+        items = self.states[:, layout.item_flags]
         at_goal = (self.states[:, 0] == layout.goal[0]) & (self.states[:, 1] == layout.goal[1])
         self.done = at_goal & items.all(axis=1)
         self.is_move = np.arange(N_ACTIONS) < PICK

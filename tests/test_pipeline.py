@@ -27,7 +27,7 @@ UNSEEN = _UNSEEN["methods"] + _UNSEEN["baselines"]
 UNSEEN_STAGES = {"collect_generalisation", "evaluate_generalisation"} | {
     f"train_generalisation@{m}" for m in _UNSEEN["methods"]} | {
     f"train_generalisation_baselines@{m}" for m in _UNSEEN["baselines"]}
-GIT_TRACKED_OUTS = {"metrics/summary.csv", "metrics/metrics.json"}  # outputs with `cache: false`: in git, and
+GIT_TRACKED_OUTS = {"metrics/summary.csv", "metrics/metrics.json", "metrics/headline.json"}  # outputs with `cache: false`: in git, and
 # changed by a run with other params
 ENV = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")  # the log as it happens
 
@@ -91,8 +91,10 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     metrics = json.loads((repo_copy / "results/metrics.json").read_text())
     assert metrics["keydoor"]["symbolic"]["fail_0"]["success_mean"] == 1.0
     assert set(metrics["keydoor"]) == set(STAGES) | {"symbolic"}
-    shown = json.loads(run(["dvc", "metrics", "show", "--json"], repo_copy))  # declared as DVC metrics
-    assert json.dumps(shown).count("success_mean") >= len(METHODS) * 1 * 2
+    shown = json.loads(run(["dvc", "metrics", "show", "--json"], repo_copy))  # the headline, declared as metrics
+    headline = next(iter(shown.values()))["data"]["metrics/headline.json"]["data"]  # (the workspace's)
+    assert set(headline) == {"keydoor", "heldout", "minigrid"} and headline["keydoor"]["symbolic"] == 1.0
+    assert sum(len(split) for split in headline.values()) <= 40 and set(headline["keydoor"]) >= set(METHODS)
     for name in ("summary.csv", "metrics.json"):  # the git-tracked copies the README's table is made from
         assert (repo_copy / "metrics" / name).read_bytes() == (repo_copy / "results" / name).read_bytes()
     usage = pd.read_csv(repo_copy / "results/training_usage.csv")
@@ -225,8 +227,16 @@ def test_killed_runs_resume_to_the_same_outputs(tmp_path, repo_copy, first_run):
 
 
 def test_a_changed_knob_reruns_only_the_stages_that_read_it(repo_copy, first_run):
-    _set(repo_copy, "evaluate", "episodes", 5)
-    assert ran_stages(run(["dvc", "repro"], repo_copy)) == {"evaluate", "report"}
+    # the README's compare-two-runs workflow: an experiment with one changed knob beside the committed run
+    run(["git", "add", "-A"], repo_copy)  # dvc.lock and the outputs kept in git (the rest: DVC's .gitignore)
+    run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "the first run"], repo_copy)
+    ran = ran_stages(run(["dvc", "exp", "run", "-S", "evaluate.episodes=5"], repo_copy))
+    assert ran == {"evaluate", "report"}
+    table = run(["dvc", "exp", "show", "--only-changed", "--no-pager"], repo_copy, env={"COLUMNS": "120"})
+    assert "evaluate.episodes" in table and "…" not in table, table  # readable: nothing elided
+    assert all(len(line) <= 120 for line in table.splitlines()), table
+    diff = run(["dvc", "exp", "diff", "HEAD"], repo_copy)  # the experiment's params and metrics against HEAD
+    assert "evaluate.episodes" in diff and all(len(line) <= 120 for line in diff.splitlines()), diff
     params = (repo_copy / "params.yaml").read_text()
 
     _set(repo_copy, "baselines.dqn", "lr", 0.001)  # one method's knob: only its instances retrain

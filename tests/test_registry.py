@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from hnsdt.agents.rollout import Agent
 from hnsdt.methods import METHODS, STAGES, architectures, resolve
 
 PACKAGE = Path(__file__).resolve().parent.parent / "hnsdt"
@@ -96,5 +97,6 @@ def test_every_method_trains_and_acts_through_its_registry_entry(tiny, name):
         model, meta = load_checkpoint(path)
         assert json.loads((path / "config.json").read_text())["arch"] == resolve(METHODS[name].network).arch
     agent = build_agent(name, env.layout, method_executor(params, name), model, meta)
+    assert isinstance(agent, Agent)  # the protocol every evaluated policy follows
     episodes = run_cell(Cell(name, "keydoor", 0.1, 0), 0, env.layout, 20, 3, agent)
     assert len(episodes) == 3 and all(1 <= ep.length <= 20 for ep in episodes)

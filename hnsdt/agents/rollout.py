@@ -1,7 +1,6 @@
-"""Run a batched agent for one episode in every copy of a :class:`KeyDoorVectorEnv` and keep the trajectories.
+"""Run a batched :class:`Agent` for one episode in every copy of a :class:`KeyDoorVectorEnv` and keep the
+trajectories.
 
-An agent is anything with ``reset(obs)``, ``act(obs) -> actions``, ``observe(obs, active, actions, rewards)``
-(the copies live during the step, and what they did and got) and ``finish()``;
 ``last_subgoals`` (ids and target cells chosen by ``act``) is recorded when the agent has it, and ``executors`` (one
 :class:`PlanExecutor` per copy) supply the plan, sub-goal segments and replans of each episode.
 """
@@ -9,6 +8,7 @@ An agent is anything with ``reset(obs)``, ``act(obs) -> actions``, ``observe(obs
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
@@ -38,6 +38,24 @@ class Episode:
         return float(self.rewards.sum())
 
 
+@runtime_checkable
+class Agent(Protocol):
+    """What every method's evaluated policy is (the registry's ``agent`` builds one): a batched policy over the
+    copies of a vector env, called once per step for all of them."""
+
+    def reset(self, obs: np.ndarray) -> None:
+        """A new episode in every copy, from these observations."""
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """One action per copy (those already done are ignored)."""
+
+    def observe(self, obs: np.ndarray, active: np.ndarray, actions: np.ndarray, rewards: np.ndarray) -> None:
+        """The step's outcome: new observations, the copies live during it, what they did and got."""
+
+    def finish(self) -> None:
+        """Every copy is done."""
+
+
 class RandomAgent:
     """Uniformly random actions (the paper's exploration policy)."""
 
@@ -59,7 +77,7 @@ class RandomAgent:
         pass
 
 
-def rollout(env: KeyDoorVectorEnv, agent, seed: int, start_states: np.ndarray | None = None,
+def rollout(env: KeyDoorVectorEnv, agent: Agent, seed: int, start_states: np.ndarray | None = None,
             epsilon: float = 0.0) -> list[Episode]:
     """One episode per copy. ``epsilon`` replaces each action by a uniform one with that probability."""
     noise = np.random.default_rng([seed, 7919])

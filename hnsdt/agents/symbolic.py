@@ -20,9 +20,8 @@ class SymbolicAgent(HierarchicalAgent):
     def __init__(self, layout: Layout, config: ExecutorConfig | None = None):
         super().__init__(layout, config)
         self.navigator = Navigator(layout)
-        nk, nd = len(layout.keys), len(layout.doors)
-        self._door_cols = slice(2 + nk, 2 + nk + nd)
-        self._door_bits = 1 << np.arange(nd, dtype=np.int64)
+        self._door_cols = layout.door_flags
+        self._door_bits = 1 << np.arange(len(layout.doors), dtype=np.int64)
 
     def low_level(self, obs: np.ndarray, subgoal_ids: np.ndarray, targets: np.ndarray) -> np.ndarray:
         masks = obs[:, self._door_cols] @ self._door_bits

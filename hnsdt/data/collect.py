@@ -74,15 +74,15 @@ class CollectConfig:
 
 def random_start_states(layout: Layout, n: int, rng: np.random.Generator) -> np.ndarray:
     flags = rng.integers(0, 2, size=(n, layout.n_flags))
-    nk = len(layout.keys)
     door_cells = list(layout.doors.values())
     cells = [c for c in layout.free_cells() if c != layout.goal]
-    states = np.zeros((n, 2 + layout.n_flags), dtype=np.int64)
+    states = np.zeros((n, layout.state_size), dtype=np.int64)
     states[:, 2:] = flags
+    doors = states[:, layout.door_flags]
     for i in range(n):
         while True:
             cell = cells[rng.integers(len(cells))]
-            if cell not in door_cells or flags[i, nk + door_cells.index(cell)]:
+            if cell not in door_cells or doors[i, door_cells.index(cell)]:
                 break  # a closed door cell would trap the agent from step 0
         states[i, :2] = cell
     return states

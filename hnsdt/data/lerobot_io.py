@@ -77,7 +77,7 @@ def dataset_features(layout: Layout, render_px: int = 0, view_radius: int = 0) -
                                                                layout.shape[1] * render_px, 3),
                                    "names": ["height", "width", "channels"]}} if render_px else {}
     return image | {
-        "observation.state": {"dtype": "int64", "shape": (2 + layout.n_flags,), "names": layout.state_names},
+        "observation.state": {"dtype": "int64", "shape": (layout.state_size,), "names": layout.state_names},
         "action": {"dtype": "int64", "shape": (1,), "names": ["action"]},
         "next.reward": {"dtype": "float32", "shape": (1,), "names": ["reward"]},
         "next.done": {"dtype": "bool", "shape": (1,), "names": ["done"]},

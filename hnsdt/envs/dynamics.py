@@ -44,7 +44,7 @@ class Rules:
 
     def __init__(self, layout: Layout):
         self.layout = lay = layout
-        self.nk, self.nd, self.ni = len(lay.keys), len(lay.doors), len(lay.items)
+        self.nd = len(lay.doors)
         h, w = lay.shape
         # Lookup grids: index of the key/door/item on each cell, -1 where none.
         self.key_at = np.full((h, w), -1, np.int64)
@@ -58,7 +58,7 @@ class Rules:
         self.goal = np.array(lay.goal, dtype=np.int64)
 
     def initial_states(self, n: int) -> np.ndarray:
-        states = np.zeros((n, 2 + self.layout.n_flags), dtype=np.int64)
+        states = np.zeros((n, self.layout.state_size), dtype=np.int64)
         states[:, :2] = self.layout.start
         return states
 
@@ -67,13 +67,13 @@ class Rules:
         """Apply ``actions`` to the ``live`` rows of ``s`` in place, with uniform draws ``u`` and failure
         probability ``fail_prob`` (one, or one per row); returns ``(success, move_failed)`` per row."""
         rows, cols = s[:, 0].copy(), s[:, 1].copy()  # positions before this step's moves
-        nk, nd = self.nk, self.nd
-        keys, doors, items = s[:, 2 : 2 + nk], s[:, 2 + nk : 2 + nk + nd], s[:, 2 + nk + nd :]
+        lay = self.layout
+        keys, doors, items = s[:, lay.key_flags], s[:, lay.door_flags], s[:, lay.item_flags]
         idx = np.arange(len(s))
 
         # Moves: fail with fail_prob, blocked by walls/edges, and impossible out of a closed door cell.
         door_here = self.door_at[rows, cols]
-        trapped = (door_here >= 0) & (doors[idx, np.maximum(door_here, 0)] == 0) if nd else np.zeros_like(live)
+        trapped = (door_here >= 0) & (doors[idx, np.maximum(door_here, 0)] == 0) if self.nd else np.zeros_like(live)
         move_failed = (actions < PICK) & (u < fail_prob)
         target = s[:, :2] + _DELTAS[actions]
         h, w = self.walls.shape
@@ -90,7 +90,7 @@ class Rules:
         i = self.item_at[rows, cols]
         sel = pick & (i >= 0)
         items[idx[sel], i[sel]] = 1
-        if nd:
+        if self.nd:
             sel = pick & (door_here >= 0)
             sel &= keys[idx, self.door_key[np.maximum(door_here, 0)]] == 1
             doors[idx[sel], door_here[sel]] = 1

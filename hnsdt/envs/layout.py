@@ -74,6 +74,24 @@ class Layout:
     def n_flags(self) -> int:
         return len(self.keys) + len(self.doors) + len(self.items)
 
+    # The observation vector: row, col, then one flag per key, door and item, in symbol order. These slices name
+    # its parts once; every module indexes states through them.
+    @property
+    def state_size(self) -> int:
+        return 2 + self.n_flags
+
+    @property
+    def key_flags(self) -> slice:
+        return slice(2, 2 + len(self.keys))
+
+    @property
+    def door_flags(self) -> slice:
+        return slice(2 + len(self.keys), 2 + len(self.keys) + len(self.doors))
+
+    @property
+    def item_flags(self) -> slice:
+        return slice(2 + len(self.keys) + len(self.doors), self.state_size)
+
     @property
     def state_names(self) -> list[str]:
         """Names of the observation vector's entries: row, col, then one flag per key, door, item."""

@@ -49,15 +49,15 @@ def static_codes(layout: Layout) -> np.ndarray:
 
 def state_codes(layout: Layout, states: np.ndarray) -> np.ndarray:
     """(N, H, W) codes of the grid in each state: held keys and items gone, open doors open."""
-    states = np.asarray(states, dtype=np.int64).reshape(-1, 2 + layout.n_flags)
+    states = np.asarray(states, dtype=np.int64).reshape(-1, layout.state_size)
     grids = np.repeat(static_codes(layout)[None], len(states), axis=0)
-    nk, nd = len(layout.keys), len(layout.doors)
+    keys, doors, items = states[:, layout.key_flags], states[:, layout.door_flags], states[:, layout.item_flags]
     for j, cell in enumerate(layout.keys.values()):
-        grids[states[:, 2 + j] == 1, cell[0], cell[1]] = FLOOR
+        grids[keys[:, j] == 1, cell[0], cell[1]] = FLOOR
     for j, (d, cell) in enumerate(layout.doors.items()):
-        grids[states[:, 2 + nk + j] == 1, cell[0], cell[1]] = DOOR_OPEN + _index(d)
+        grids[doors[:, j] == 1, cell[0], cell[1]] = DOOR_OPEN + _index(d)
     for j, cell in enumerate(layout.items.values()):
-        grids[states[:, 2 + nk + nd + j] == 1, cell[0], cell[1]] = FLOOR
+        grids[items[:, j] == 1, cell[0], cell[1]] = FLOOR
     return grids
 
 
@@ -66,7 +66,7 @@ def local_view(layout: Layout, states: np.ndarray, radius: int) -> np.ndarray:
     lies under it)."""
     if radius < 1:
         raise ValueError(f"view radius must be >= 1, got {radius}")
-    states = np.asarray(states, dtype=np.int64).reshape(-1, 2 + layout.n_flags)
+    states = np.asarray(states, dtype=np.int64).reshape(-1, layout.state_size)
     grids = state_codes(layout, states)
     n = len(grids)
     padded = np.full((n, grids.shape[1] + 2 * radius, grids.shape[2] + 2 * radius), OUTSIDE, dtype=np.int64)
@@ -80,14 +80,14 @@ def local_view(layout: Layout, states: np.ndarray, radius: int) -> np.ndarray:
 def view_states(layout: Layout, states: np.ndarray, radius: int) -> np.ndarray:
     """``row, col, view codes (row-major), flags`` per state: what a learner on unseen layouts reads
     (:mod:`hnsdt.models.view`), and what a dataset over many layouts stores beside ``observation.state``."""
-    states = np.asarray(states, dtype=np.int64).reshape(-1, 2 + layout.n_flags)
+    states = np.asarray(states, dtype=np.int64).reshape(-1, layout.state_size)
     views = local_view(layout, states, radius).reshape(len(states), -1)
     return np.concatenate([states[:, :2], views, states[:, 2:]], axis=1)
 
 
 def full_view(layout: Layout, states: np.ndarray) -> np.ndarray:
     """(N, H, W) codes of the whole grid with the agent's cell marked ``AGENT``."""
-    states = np.asarray(states, dtype=np.int64).reshape(-1, 2 + layout.n_flags)
+    states = np.asarray(states, dtype=np.int64).reshape(-1, layout.state_size)
     grids = state_codes(layout, states)
     grids[np.arange(len(grids)), states[:, 0], states[:, 1]] = AGENT
     return grids

@@ -21,11 +21,10 @@ COLOURS = {
 
 def split_state(layout: Layout, state: np.ndarray) -> tuple[tuple[int, int], set[str], set[str], set[str]]:
     """Observation vector -> (cell, keys held, doors open, items held)."""
-    nk, nd = len(layout.keys), len(layout.doors)
-    flags = np.asarray(state[2:], dtype=bool)
-    keys = {k for k, f in zip(layout.keys, flags[:nk]) if f}
-    doors = {d for d, f in zip(layout.doors, flags[nk : nk + nd]) if f}
-    items = {i for i, f in zip(layout.items, flags[nk + nd :]) if f}
+    state = np.asarray(state)
+    keys = {k for k, f in zip(layout.keys, state[layout.key_flags]) if f}
+    doors = {d for d, f in zip(layout.doors, state[layout.door_flags]) if f}
+    items = {i for i, f in zip(layout.items, state[layout.item_flags]) if f}
     return (int(state[0]), int(state[1])), keys, doors, items
 
 

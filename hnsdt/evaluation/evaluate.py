@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from hnsdt.agents.executor import ExecutorConfig
-from hnsdt.agents.rollout import Episode, rollout
+from hnsdt.agents.rollout import Agent, Episode, rollout
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv
 from hnsdt.methods import ARMS, resolve
@@ -59,7 +59,7 @@ def load_model(models_root: str | Path, env: str, method: str, seed: int, device
 
 
 def build_agent(method: str, layout: Layout, executor: ExecutorConfig, model=None, meta: dict | None = None,
-                epsilon: float = 0.0, agent_seed: int = 0):
+                epsilon: float = 0.0, agent_seed: int = 0) -> Agent:
     """The batched agent of ``method`` around its trained ``model``. ``epsilon`` and ``agent_seed`` only
     matter to the online baselines (ε-greedy noise, sampled options)."""
     entry = lookup_method(method)
@@ -120,7 +120,6 @@ def segment_rows(cell: Cell, episodes: list[Episode], navigator) -> list[dict]:
     pick/open."""
     rows = []
     lay = navigator.layout
-    nk = len(lay.keys)
     for i, ep in enumerate(episodes):
         for seg in ep.segments:
             end = seg.end if seg.end is not None else ep.length
@@ -131,7 +130,7 @@ def segment_rows(cell: Cell, episodes: list[Episode], navigator) -> list[dict]:
             if seg.operator.startswith("Move"):
                 optimal = 1 / (1 - cell.fail_prob)
             elif seg.operator.startswith("GoTo"):
-                mask = navigator.door_mask({d for j, d in enumerate(lay.doors) if state[2 + nk + j]})
+                mask = navigator.door_mask({d for d, f in zip(lay.doors, state[lay.door_flags]) if f})
                 dist = navigator.distance[navigator.target_index[target], mask, state[0], state[1]]
                 optimal = dist / (1 - cell.fail_prob) if dist >= 0 else np.nan
             else:

@@ -603,9 +603,34 @@ def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
                 ["method", "seed", "layout", "fail_prob"]).size().max())}
 
 
+HEADLINE_SPLITS = ("heldout", "minigrid")  # the unseen-layout splits in the headline (training maps: the report)
+
+
+def headline_metrics(summ: pd.DataFrame, unseen: pd.DataFrame | None = None) -> dict:
+    """The few numbers `dvc metrics show` and `dvc exp show` compare by default (the per-cell tables stay in
+    ``results/`` and ``metrics/summary.csv``): per split (each paper env, each unseen-layout split) every method's
+    success and HNSDT's steps / optimum, each the mean over the failure probabilities of the mean over seeds.
+    Short keys (``keydoor.hnsdt``), so that `dvc exp show --only-changed` fits a terminal."""
+    def mean(values: pd.Series) -> float | None:
+        return None if values.isna().all() else round(float(values.mean()), 4)
+
+    splits = [(env, summ[summ.env == env], "steps_ratio") for env in dict.fromkeys(summ.env)]
+    if unseen is not None:
+        splits += [(split, unseen[unseen.split == split], "steps_ratio_mean") for split in HEADLINE_SPLITS]
+    out = {}
+    for name, d, ratio_column in splits:
+        if len(d):
+            out[name] = {m: mean(d[d.method == m].success_mean) for m in _methods(d)}
+            ratio = mean(d[d.method == PROPOSED][ratio_column]) if ratio_column in d else None
+            if ratio is not None:
+                out[name][f"{PROPOSED}_steps_ratio"] = ratio
+    return out
+
+
 def write_report(params: Params, results: Path, out: Path, lock_path: str | Path = "dvc.lock",
-                 generalisation: Path | None = None) -> Path:
-    """``generalisation``: the unseen-layout experiment's results folder (its section is left out without one)."""
+                 generalisation: Path | None = None, headline: Path | None = None) -> Path:
+    """``generalisation``: the unseen-layout experiment's results folder (its section is left out without one);
+    ``headline``: where to write :func:`headline_metrics` as JSON."""
     summary_path = results / "summary.csv"
     if not summary_path.is_file():
         raise FileNotFoundError(f"{summary_path}: no evaluation summary (run `dvc repro evaluate`)")
@@ -667,4 +692,10 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             (tmp / "theorems.json").write_text(json.dumps(theorem_data, indent=2, sort_keys=True, default=float) + "\n")
         (tmp / "provenance.json").write_text(json.dumps(
             {"git_revision": rev, "params_digest": digest, "inputs": inputs}, indent=2, sort_keys=True) + "\n")
+        if headline is not None:
+            from hnsdt.fileio import atomic_file
+
+            unseen_summary = pd.read_csv(generalisation / "summary.csv") if generalisation is not None else None
+            with atomic_file(headline) as tmp_headline:
+                tmp_headline.write_text(json.dumps(headline_metrics(summ, unseen_summary), indent=2) + "\n")
     return out / "report.md"

@@ -32,10 +32,10 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
+from hnsdt.envs.dynamics import N_ACTIONS  # the world's actions (the Actions enum), the head's outputs
 from hnsdt.models.network import Network
 from hnsdt.symbolic.subgoals import VOCAB_SIZE
 
-N_ACTIONS = 5
 CONDITIONS = ("subgoal", "return", "none")
 TOKEN_LAYOUTS = ("step", "interleaved")
 NO_ACTION = N_ACTIONS  # "step" layout: the previous action of a window's or an episode's first step

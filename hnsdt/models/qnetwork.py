@@ -12,7 +12,7 @@ import torch
 import torch.nn as nn
 import torch.nn.functional as F
 
-from hnsdt.models.dt import N_ACTIONS
+from hnsdt.envs.dynamics import N_ACTIONS
 from hnsdt.models.network import Network
 
 
