@@ -93,7 +93,7 @@ def cmd_dataset_push(args) -> None:
     import os
 
     os.environ.setdefault("HF_HUB_OFFLINE", "0")  # the library reads datasets offline; pushing needs the Hub
-    from hnsdt.data.card import push_dataset, push_plan
+    from hnsdt.data.hub import push_dataset, push_plan
 
     root = Path(args.root or f"data/datasets/{args.env}")
     if "/" not in args.repo_id:

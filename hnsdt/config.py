@@ -138,7 +138,7 @@ class TrainSettings:
 
 
 def train_settings(params: Params) -> TrainSettings:
-    from hnsdt.data.windows import LOSS_STEPS
+    from hnsdt.models.windows import LOSS_STEPS
     from hnsdt.models.train import TrainConfig
 
     train = params.need("train")

@@ -175,7 +175,7 @@ def _budget(params: Params, method: str, train_cfg):
 
 def plan_runs(params: Params, method: str, dataset: str | Path) -> list:
     """One :class:`hnsdt.training.TrainTask` per seed."""
-    from hnsdt.data.windows import load_frames
+    from hnsdt.data.frames import load_frames
     from hnsdt.training import TrainTask
 
     g = settings(params)

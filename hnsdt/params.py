@@ -14,7 +14,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
 
 from hnsdt.data.collect import POLICIES, STARTS
-from hnsdt.data.windows import LOSS_STEPS
+from hnsdt.models.windows import LOSS_STEPS
 from hnsdt.envs.generate import FAMILIES
 from hnsdt.compute import EXECUTORS
 from hnsdt.methods import BASELINES, DT_METHODS, LEARNED, METHODS, OFFLINE_BASELINES, ONLINE_BASELINES

@@ -40,7 +40,7 @@ def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: 
     training = METHODS[method].training
     frames = None
     if training == "dataset":
-        from hnsdt.data.windows import load_frames
+        from hnsdt.data.frames import load_frames
 
         # read once, shipped to every seed's task, with the sub-goal labels of the method's operators
         frames = load_frames(dataset, method_executor(params, method).operators)

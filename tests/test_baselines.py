@@ -14,7 +14,7 @@ from hnsdt.agents.baselines.recurrent import RecurrentAgent, RecurrentTrainConfi
 from hnsdt.agents.rollout import RandomAgent
 from hnsdt.config import ParamsError, baseline_settings, evaluate_settings, load_params
 from hnsdt.params import validate
-from hnsdt.data.windows import frames_from_arrays
+from hnsdt.models.windows import frames_from_arrays
 from hnsdt.envs import KeyDoorVectorEnv, load_layout
 from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint
 from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig, QNetwork, QNetworkConfig

@@ -9,7 +9,7 @@ import torch
 
 from hnsdt.agents import SymbolicAgent, rollout
 from hnsdt.agents.baselines.recurrent import RecurrentTrainConfig, train_recurrent
-from hnsdt.data.windows import frames_from_arrays
+from hnsdt.models.windows import frames_from_arrays
 from hnsdt.envs import KeyDoorVectorEnv
 from hnsdt.compute import Compute, Continue, run_tasks
 from hnsdt.models.dt import DTConfig

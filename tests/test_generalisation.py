@@ -170,7 +170,7 @@ def test_hnsdt_with_the_view_dt_trains_on_some_layouts_and_runs_on_others():
     from hnsdt.agents.executor import ExecutorConfig
     from hnsdt.agents.rollout import rollout
     from hnsdt.data.collect import Behaviour, CollectConfig, collect_episodes
-    from hnsdt.data.windows import frames_from_arrays
+    from hnsdt.models.windows import frames_from_arrays
     from hnsdt.envs.minigrid_adapter import from_minigrid
     from hnsdt.models.train import TrainConfig, train_dt
     from hnsdt.models.view import ViewDecisionTransformer, view_config, view_states
@@ -296,7 +296,7 @@ def test_the_dataset_over_generated_layouts_stores_each_frames_view(tmp_path):
     frames the learners read are view states."""
     from hnsdt import generalisation as gen
     from hnsdt.data.lerobot_io import open_dataset
-    from hnsdt.data.windows import load_frames
+    from hnsdt.data.frames import load_frames
     from hnsdt.models.view import view_states
 
     params = _tiny_generalisation_params(tmp_path)

@@ -4,7 +4,7 @@ import torch
 
 from hnsdt.agents import SymbolicAgent, rollout
 from hnsdt.agents.dt_agents import History, HNSDTAgent, _greedy
-from hnsdt.data.windows import frames_from_arrays, make_windows, window_ends
+from hnsdt.models.windows import frames_from_arrays, make_windows, window_ends
 from hnsdt.envs import KeyDoorVectorEnv
 from hnsdt.models.dt import DecisionTransformer, DTConfig
 from hnsdt.models.train import TrainConfig, load_checkpoint, save_checkpoint, train_dt

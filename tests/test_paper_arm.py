@@ -13,7 +13,7 @@ from hnsdt.agents.dt_agents import History, _greedy
 from hnsdt.agents.rollout import RandomAgent
 from hnsdt.data.collect import Behaviour, CollectConfig, _episode_record, random_start_states
 from hnsdt.data.segmentation import hindsight_labels
-from hnsdt.data.windows import frames_from_arrays, make_windows
+from hnsdt.models.windows import frames_from_arrays, make_windows
 from hnsdt.envs import load_layout
 from hnsdt.envs.vector import KeyDoorVectorEnv
 from hnsdt.models.dt import DecisionTransformer, DTConfig

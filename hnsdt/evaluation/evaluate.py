@@ -145,7 +145,7 @@ def segment_rows(cell: Cell, episodes: list[Episode], navigator) -> list[dict]:
 def training_segment_counts(dataset_root: str | Path, env: str, behaviours) -> list[dict]:
     """Sub-goal segments per operator in a dataset, over the episodes of ``behaviours`` (Theorem 2's m)."""
     from hnsdt.data.segmentation import segments_of
-    from hnsdt.data.windows import load_frames
+    from hnsdt.data.frames import load_frames
     from hnsdt.symbolic.subgoals import ID_TO_NAME
 
     frames = load_frames(dataset_root)

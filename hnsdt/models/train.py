@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from hnsdt.data.windows import Frames, make_windows, window_ends
+from hnsdt.models.windows import Frames, make_windows, window_ends
 from hnsdt.models.fit import FitState, Objective, fit
 from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint  # noqa: F401  (re-exported)
 from hnsdt.models.dt import DecisionTransformer, DTConfig
@@ -27,7 +27,7 @@ class TrainConfig:
     device: str = "auto"  # "auto" = cuda if available, else cpu
     log_every: int = 10  # one training-curve row per this many steps
     behaviours: tuple[str, ...] = ()  # train on episodes of these collection behaviours (empty = all)
-    loss: str = "window"  # the window steps the loss counts: "window" or "last" (hnsdt.data.windows.make_windows)
+    loss: str = "window"  # the window steps the loss counts: "window" or "last" (hnsdt.models.windows.make_windows)
 
 
 def pick_device(name: str) -> torch.device:

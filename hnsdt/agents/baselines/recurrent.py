@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from hnsdt.data.windows import Frames
+from hnsdt.models.windows import Frames
 from hnsdt.models.fit import FitState, Objective, fit
 from hnsdt.models.recurrent import START_ACTION, RecurrentConfig, RecurrentPolicy
 

@@ -1,14 +1,14 @@
-"""Context windows for the decision transformer, read from a LeRobot dataset.
+"""What the offline learners train on: a dataset's :class:`Frames` as numpy arrays, and the decision
+transformer's context windows cut from them.
 
-Frames are read once through stock ``LeRobotDataset`` (its Arrow table, as numpy) and windows are cut with
-numpy indexing: the same windows ``delta_timestamps`` gives, left-padded at episode starts, but built in
-milliseconds for a whole epoch instead of one ``__getitem__`` call per sample.
+Windows are cut with numpy indexing: the same windows LeRobot's ``delta_timestamps`` gives, left-padded at
+episode starts, but built in milliseconds for a whole epoch instead of one ``__getitem__`` call per sample.
+:func:`hnsdt.data.frames.load_frames` reads the frames of a LeRobot dataset.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
@@ -45,25 +45,6 @@ def frames_from_arrays(states, actions, rewards, subgoals, targets, episode, tim
                   np.asarray(subgoals, np.int64).reshape(n), np.asarray(targets, np.int64).reshape(n, 2),
                   episode, np.asarray(timestep, np.int64).reshape(n), episode_start, rtg,
                   np.asarray(policy if policy is not None else [""] * n, dtype=object))
-
-
-def load_frames(root: str | Path, operators: str = "goto") -> Frames:
-    """The dataset's frames, with the sub-goal labelling of the operator set ``operators``: ``goto`` reads
-    ``subgoal`` (the planner's operators, or hindsight GoTo labels), ``move`` the paper's ``move_subgoal``.
-    A dataset with views (over many layouts) gives view states: row, col, view codes, flags."""
-    from hnsdt.data.lerobot_io import episode_table, open_dataset
-
-    column = {"goto": "subgoal", "move": "move_subgoal"}[operators]
-    ds = open_dataset(root)
-    cols = ds.hf_dataset.with_format("numpy")[:]
-    policies = episode_table(root).set_index("episode_index")["policy"]
-    states = np.stack(cols["observation.state"])
-    if "observation.view" in cols:  # a dataset over many layouts: view states (hnsdt.models.view.view_states)
-        states = np.concatenate([states[:, :2], np.stack(cols["observation.view"]), states[:, 2:]], axis=1)
-    return frames_from_arrays(states, np.ravel(cols["action"]),
-                              np.ravel(cols["next.reward"]), np.ravel(cols[column]),
-                              np.stack(cols[f"{column}.target"]), cols["episode_index"], cols["frame_index"],
-                              policies.loc[cols["episode_index"]].to_numpy())
 
 
 def window_ends(frames: Frames, condition: str, behaviours=()) -> np.ndarray:
