@@ -74,18 +74,11 @@ def cmd_pddl(args) -> None:
 
 
 def cmd_collect(args) -> None:
-    from hnsdt.config import collect_config, load_params
-    from hnsdt.data.collect import collect_dataset
+    from hnsdt import stages
+    from hnsdt.config import load_params
 
-    from hnsdt.provenance import git_revision, params_digest
-
-    params = load_params(args.params)
-    cfg = collect_config(params, args.env)
-    out = Path(args.out or f"data/datasets/{args.env}")
-    provenance = {"git_revision": git_revision(), "params_digest": params_digest(params)}  # into the card
-    root = collect_dataset(cfg, out, args.repo_id or f"local/{args.env}", progress=not args.quiet,
-                           provenance=provenance)
-    print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
+    stages.collect(load_params(args.params), args.env, Path(args.out or f"data/datasets/{args.env}"), args.repo_id,
+                   progress=not args.quiet)
 
 
 def cmd_dataset_push(args) -> None:
@@ -111,52 +104,34 @@ def cmd_dataset_push(args) -> None:
 
 def cmd_train(args) -> None:
     """Train one method on one env for every seed (train.seeds, or --seed): one task per seed on the
-    executor of ``compute`` (or --executor/--workers). Same seed, same weights, whatever the executor and
-    however many workers (tested)."""
-    from hnsdt.config import compute_settings, env_spec, load_params, train_settings
-    from hnsdt.training import plan_runs, train_all
+    executor of ``compute`` (or --executor/--workers)."""
+    from hnsdt import stages
+    from hnsdt.config import compute_settings, load_params
 
     params = load_params(args.params)
-    ts = train_settings(params)
-    if args.env not in ts.envs:
-        raise ValueError(f"env {args.env!r} is not in train.envs {list(ts.envs)}")
-    env_spec(params, args.env)
-    compute = compute_settings(params, args.executor, args.workers)
-    seeds = args.seed if args.seed is not None else list(ts.seeds)
-    out = Path(args.out or f"models/{args.env}/{args.method}")
-    curves = Path(args.curves or f"plots/train/{args.env}-{args.method}")
-    runs = plan_runs(params, args.env, args.method, seeds, Path(args.dataset or f"data/datasets/{args.env}"))
-    train_all(runs, args.env, out, curves, compute, progress=not args.quiet)
-    print(f"wrote {', '.join(f'seed{s}' for s in seeds)} -> {out}/ (curves: {curves}/)")
+    stages.train(params, args.env, args.method, Path(args.dataset or f"data/datasets/{args.env}"),
+                 Path(args.out or f"models/{args.env}/{args.method}"),
+                 Path(args.curves or f"plots/train/{args.env}-{args.method}"), seeds=args.seed,
+                 compute=compute_settings(params, args.executor, args.workers), progress=not args.quiet)
 
 
 def cmd_evaluate(args) -> None:
-    from hnsdt.config import compute_settings, env_spec, evaluate_settings, executor_config, load_params
-    from hnsdt.evaluation.evaluate import evaluate_all, summary
-    from hnsdt.methods import ARMS
-    from hnsdt.provenance import git_revision, params_digest
+    from hnsdt import stages
+    from hnsdt.config import compute_settings, load_params
 
     params = load_params(args.params)
-    settings = evaluate_settings(params)
-    envs = {e: env_spec(params, e) for e in settings.envs}
-    compute = compute_settings(params, args.executor, args.workers)
-    provenance = {"git_revision": git_revision(), "params_digest": params_digest(params)}  # into each recording
-    executors = {arm: executor_config(params, arm) for arm in ARMS}
-    table = evaluate_all(settings, envs, executors, args.models, args.out, args.datasets, progress=not args.quiet,
-                         recordings_dir=args.recordings, compute=compute, provenance=provenance)
-    summ = summary(table)
-    print(summ[["method", "env", "fail_prob", "success_mean", "steps_mean", "reward_mean"]].to_string(
-        index=False, float_format=lambda v: f"{v:.3f}"))
+    stages.evaluate(params, Path(args.models), Path(args.datasets), Path(args.out),
+                    Path(args.recordings) if args.recordings else None,
+                    compute=compute_settings(params, args.executor, args.workers), progress=not args.quiet)
 
 
 def cmd_report(args) -> None:
+    from hnsdt import stages
     from hnsdt.config import load_params
-    from hnsdt.evaluation.report import write_report
 
-    path = write_report(load_params(args.params), Path(args.results), Path(args.out),
-                        generalisation=Path(args.generalisation) if args.generalisation else None,
-                        headline=Path(args.headline) if args.headline else None)
-    print(f"wrote {path}")
+    stages.report(load_params(args.params), Path(args.results), Path(args.out),
+                  generalisation=Path(args.generalisation) if args.generalisation else None,
+                  headline=Path(args.headline) if args.headline else None)
 
 
 def cmd_replay(args) -> None:
@@ -223,30 +198,22 @@ def _open_in_rerun(rrds: list[Path]) -> None:
 
 def cmd_generalisation(args) -> None:
     """The unseen-layout experiment's stages (hnsdt.generalisation): collect, train one method, evaluate."""
-    from hnsdt import generalisation as gen
+    from hnsdt import stages
     from hnsdt.config import compute_settings, load_params
-    from hnsdt.provenance import git_revision, params_digest
 
     params = load_params(args.params)
-    gen.settings(params)  # "missing key generalisation" before any work
+    params.need("generalisation")  # "missing key generalisation" before any work
     if args.action == "collect":
-        provenance = {"git_revision": git_revision(), "params_digest": params_digest(params)}
-        root = gen.collect(params, Path(args.out), provenance, progress=not args.quiet)
-        print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
+        stages.collect_unseen(params, Path(args.out), progress=not args.quiet)
         return
     compute = compute_settings(params, args.executor, args.workers)
     if args.action == "train":
-        from hnsdt.training import train_all
-
         if not args.method or not args.curves:
             raise ValueError("generalisation train needs --method and --curves")
-        runs = gen.plan_runs(params, args.method, Path(args.dataset))
-        train_all(runs, gen.settings(params).family, Path(args.out), Path(args.curves), compute,
-                  progress=not args.quiet)
-        print(f"wrote {', '.join(f'seed{r.seed}' for r in runs)} -> {args.out}/ (curves: {args.curves}/)")
+        stages.train_unseen(params, args.method, Path(args.dataset), Path(args.out), Path(args.curves), compute,
+                            progress=not args.quiet)
         return
-    table = gen.evaluate(params, Path(args.models), Path(args.out), compute, progress=not args.quiet)
-    print(f"wrote {args.out}/episodes.csv ({len(table)} episodes), summary.csv, layouts.csv")
+    stages.evaluate_unseen(params, Path(args.models), Path(args.out), compute, progress=not args.quiet)
 
 
 def _compute_arguments(p: argparse.ArgumentParser) -> None:
@@ -377,15 +344,9 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "replay" and not args.episode_id and args.dataset is None:
         parser.error("replay needs an EPISODE_ID or --dataset")
-    from hnsdt.config import ParamsError
-    from hnsdt.envs import LayoutError
+    from hnsdt.stages import guarded
 
-    try:
-        args.func(args)
-    except (ParamsError, LayoutError, ValueError, RuntimeError, OSError) as e:
-        print("hnsdt: error: " + " ".join(str(e).split()), file=sys.stderr)  # always one line
-        return 2
-    return 0
+    return guarded(args.func, args)
 
 
 if __name__ == "__main__":

@@ -1,15 +1,21 @@
-"""DVC stage `collect@ENV`: exploration data for one environment as a LeRobot dataset.
+"""DVC stage `collect@ENV`: exploration data for one environment as a LeRobot dataset (hnsdt.stages.collect).
 
-Usage: python pipeline/collect.py --env ENV --out data/datasets/ENV   (`hnsdt collect --help` lists the options)
+Usage: python pipeline/collect.py --env ENV --out data/datasets/ENV
 """
 
+import argparse
 import sys
+from pathlib import Path
 
 from hnsdt.reproducible import pin_process
 
 pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 
-from hnsdt.cli import main  # noqa: E402
+from hnsdt import stages  # noqa: E402
 
 if __name__ == "__main__":
-    sys.exit(main(["collect", *sys.argv[1:]]))
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env", required=True)
+    parser.add_argument("--out", required=True, type=Path)
+    args = parser.parse_args()
+    sys.exit(stages.run(stages.collect, env=args.env, out=args.out))

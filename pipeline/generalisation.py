@@ -1,20 +1,33 @@
 """DVC stages `collect_generalisation`, `train_generalisation` and `evaluate_generalisation`: the unseen-layout
-experiment (hnsdt.generalisation).
+experiment (hnsdt.generalisation, through hnsdt.stages).
 
 Usage: python pipeline/generalisation.py collect --out generalisation/dataset
        python pipeline/generalisation.py train --method METHOD --dataset generalisation/dataset
            --out generalisation/models/METHOD --curves plots/train/generalisation-METHOD
        python pipeline/generalisation.py evaluate --models generalisation/models --out generalisation/results
-(`hnsdt generalisation --help` lists the options.)
 """
 
+import argparse
 import sys
+from pathlib import Path
 
 from hnsdt.reproducible import pin_process
 
 pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 
-from hnsdt.cli import main  # noqa: E402
+from hnsdt import stages  # noqa: E402
 
 if __name__ == "__main__":
-    sys.exit(main(["generalisation", *sys.argv[1:]]))
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="action", required=True)
+    sub.add_parser("collect").add_argument("--out", required=True, type=Path)
+    p = sub.add_parser("train")
+    p.add_argument("--method", required=True)
+    for name in ("--dataset", "--out", "--curves"):
+        p.add_argument(name, required=True, type=Path)
+    p = sub.add_parser("evaluate")
+    for name in ("--models", "--out"):
+        p.add_argument(name, required=True, type=Path)
+    args = vars(parser.parse_args())
+    stage = {"collect": stages.collect_unseen, "train": stages.train_unseen, "evaluate": stages.evaluate_unseen}
+    sys.exit(stages.run(stage[args.pop("action")], **args))

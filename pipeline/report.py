@@ -1,15 +1,24 @@
-"""DVC stage `report`: figures and report.md traced to the git revision, params and input md5s.
+"""DVC stage `report`: figures and report.md traced to the git revision, params and input md5s, and the headline
+metrics (hnsdt.stages.report).
 
-Usage: python pipeline/report.py --results results --out report   (`hnsdt report --help`)
+Usage: python pipeline/report.py --results results --generalisation generalisation/results --out report
+       --headline metrics/headline.json
 """
 
+import argparse
 import sys
+from pathlib import Path
 
 from hnsdt.reproducible import pin_process
 
 pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 
-from hnsdt.cli import main  # noqa: E402
+from hnsdt import stages  # noqa: E402
 
 if __name__ == "__main__":
-    sys.exit(main(["report", *sys.argv[1:]]))
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    for name in ("--results", "--generalisation", "--out", "--headline"):
+        parser.add_argument(name, required=True, type=Path)
+    args = parser.parse_args()
+    sys.exit(stages.run(stages.report, results=args.results, out=args.out, generalisation=args.generalisation,
+                        headline=args.headline))

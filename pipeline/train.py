@@ -1,18 +1,29 @@
 """DVC stages `train`, `train_offline` and `train_online`: one learned method on one env, every seed of
-train.seeds in this one process.
+train.seeds in this one process (hnsdt.stages.train).
 
 Usage: python pipeline/train.py --env ENV --method METHOD [--dataset data/datasets/ENV] --out models/ENV/METHOD
-       --curves plots/train/ENV-METHOD   (`hnsdt train --help` lists the options)
+       --curves plots/train/ENV-METHOD
 Writes OUT/seedK/{model.safetensors,config.json} and CURVES/seedK.csv.
 """
 
+import argparse
 import sys
+from pathlib import Path
 
 from hnsdt.reproducible import pin_process
 
 pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 
-from hnsdt.cli import main  # noqa: E402
+from hnsdt import stages  # noqa: E402
 
 if __name__ == "__main__":
-    sys.exit(main(["train", *sys.argv[1:]]))
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--env", required=True)
+    parser.add_argument("--method", required=True)
+    parser.add_argument("--dataset", type=Path, help="offline methods: the dataset (default: data/datasets/ENV)")
+    parser.add_argument("--out", required=True, type=Path)
+    parser.add_argument("--curves", required=True, type=Path)
+    args = parser.parse_args()
+    dataset = args.dataset or Path("data/datasets") / args.env
+    sys.exit(stages.run(stages.train, env=args.env, method=args.method, dataset=dataset, out=args.out,
+                        curves=args.curves))

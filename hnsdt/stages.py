@@ -1,0 +1,136 @@
+"""The pipeline's stages as functions: each takes the validated params (:func:`hnsdt.config.load_params`) and
+explicit paths, does its work on the executor of ``compute`` and writes its outputs, each complete or absent.
+
+The DVC stage scripts in ``pipeline/`` call them directly (so a stage depends on this module, not on the
+command line's help texts), and so do the ``hnsdt`` subcommands of the same names. :func:`run` gives a stage
+script the command line's error contract: bad input ends with one ``hnsdt: error:`` line and exit status 2.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Callable
+
+from hnsdt.config import Params, compute_settings, load_params
+
+
+def _provenance(params: Params) -> dict:
+    """What the outputs cite: the code's git revision and the params' digest."""
+    from hnsdt.provenance import git_revision, params_digest
+
+    return {"git_revision": git_revision(), "params_digest": params_digest(params)}
+
+
+def collect(params: Params, env: str, out: Path, repo_id: str | None = None, progress: bool = True) -> Path:
+    """Stage `collect@ENV`: exploration episodes on one env as a LeRobot dataset at ``out``."""
+    from hnsdt.config import collect_config
+    from hnsdt.data.collect import collect_dataset
+
+    root = collect_dataset(collect_config(params, env), out, repo_id or f"local/{env}", progress=progress,
+                           provenance=_provenance(params))
+    print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
+    return root
+
+
+def train(params: Params, env: str, method: str, dataset: Path, out: Path, curves: Path,
+          seeds: list[int] | None = None, compute=None, progress: bool = True) -> None:
+    """Stages `train`, `train_offline`, `train_online`: one method on one env, every seed (``train.seeds``
+    unless ``seeds``) a task on ``compute``'s executor. Same seed, same weights, whatever the executor and
+    however many workers (tested)."""
+    from hnsdt.config import env_spec, train_settings
+    from hnsdt.training import plan_runs, train_all
+
+    ts = train_settings(params)
+    if env not in ts.envs:
+        raise ValueError(f"env {env!r} is not in train.envs {list(ts.envs)}")
+    env_spec(params, env)
+    seeds = list(seeds) if seeds is not None else list(ts.seeds)
+    runs = plan_runs(params, env, method, seeds, dataset)
+    train_all(runs, env, out, curves, compute or compute_settings(params), progress=progress)
+    print(f"wrote {', '.join(f'seed{s}' for s in seeds)} -> {out}/ (curves: {curves}/)")
+
+
+def evaluate(params: Params, models: Path, datasets: Path, out: Path, recordings: Path | None = None,
+             metrics: Path | None = None, compute=None, progress: bool = True):
+    """Stage `evaluate`: every method × env × fail_prob × seed; the tables under ``out``, the recordings under
+    ``recordings`` (default: beside ``out``), and copies of the two small summaries under ``metrics`` (kept in
+    git, so the README's table and `dvc plots show` work on a fresh clone)."""
+    import shutil
+
+    from hnsdt.config import env_spec, evaluate_settings, executor_config
+    from hnsdt.evaluation.evaluate import evaluate_all, summary
+    from hnsdt.fileio import atomic_file
+    from hnsdt.methods import ARMS
+
+    settings = evaluate_settings(params)
+    envs = {e: env_spec(params, e) for e in settings.envs}
+    executors = {arm: executor_config(params, arm) for arm in ARMS}
+    table = evaluate_all(settings, envs, executors, models, out, datasets, progress=progress,
+                         recordings_dir=recordings, compute=compute or compute_settings(params),
+                         provenance=_provenance(params))
+    if metrics is not None:
+        for name in ("summary.csv", "metrics.json"):
+            with atomic_file(Path(metrics) / name) as tmp:
+                shutil.copyfile(Path(out) / name, tmp)
+    summ = summary(table)
+    print(summ[["method", "env", "fail_prob", "success_mean", "steps_mean", "reward_mean"]].to_string(
+        index=False, float_format=lambda v: f"{v:.3f}"))
+    return summ
+
+
+def report(params: Params, results: Path, out: Path, generalisation: Path | None = None,
+           headline: Path | None = None) -> Path:
+    """Stage `report`: figures and report.md, and the headline metrics (``headline``)."""
+    from hnsdt.evaluation.report import write_report
+
+    path = write_report(params, results, out, generalisation=generalisation, headline=headline)
+    print(f"wrote {path}")
+    return path
+
+
+def collect_unseen(params: Params, out: Path, progress: bool = True) -> Path:
+    """Stage `collect_generalisation`: one dataset with views over the generated training layouts."""
+    from hnsdt import generalisation as gen
+
+    root = gen.collect(params, out, _provenance(params), progress=progress)
+    print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
+    return root
+
+
+def train_unseen(params: Params, method: str, dataset: Path, out: Path, curves: Path, compute=None,
+                 progress: bool = True) -> None:
+    """Stages `train_generalisation`, `train_generalisation_baselines`: one method on views, every seed."""
+    from hnsdt import generalisation as gen
+    from hnsdt.training import train_all
+
+    runs = gen.plan_runs(params, method, dataset)
+    train_all(runs, gen.settings(params).family, out, curves, compute or compute_settings(params), progress=progress)
+    print(f"wrote {', '.join(f'seed{r.seed}' for r in runs)} -> {out}/ (curves: {curves}/)")
+
+
+def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progress: bool = True):
+    """Stage `evaluate_generalisation`: every method × seed on the training, held-out and MiniGrid layouts."""
+    from hnsdt import generalisation as gen
+
+    table = gen.evaluate(params, models, out, compute or compute_settings(params), progress=progress)
+    print(f"wrote {out}/episodes.csv ({len(table)} episodes), summary.csv, layouts.csv")
+    return table
+
+
+def guarded(fn: Callable[..., object], *args, **kwargs) -> int:
+    """``fn(*args, **kwargs)`` under the command line's error contract: 0, or 2 after one ``hnsdt: error:`` line
+    naming the problem (the ``hnsdt`` command and every stage script use it)."""
+    from hnsdt.envs import LayoutError
+
+    try:
+        fn(*args, **kwargs)
+    except (LayoutError, ValueError, RuntimeError, OSError) as e:  # (a ParamsError is a ValueError)
+        print("hnsdt: error: " + " ".join(str(e).split()), file=sys.stderr)  # always one line
+        return 2
+    return 0
+
+
+def run(stage: Callable[..., object], params_path: str | Path = "params.yaml", **arguments) -> int:
+    """What a stage script runs: ``stage(load_params(params_path), **arguments)``, :func:`guarded`."""
+    return guarded(lambda: stage(load_params(params_path), **arguments))
