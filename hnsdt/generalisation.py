@@ -23,12 +23,10 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.config import (EnvSpec, Params, baseline_settings, eval_epsilon, executor_config, fill,
                           method_executor, train_settings)
 from hnsdt.envs.layout import Layout
@@ -220,45 +218,30 @@ def episode_seed(seed: int, layout_index: int) -> int:
     return int(np.random.SeedSequence([seed, layout_index, 7207]).generate_state(1)[0])
 
 
-@dataclass(frozen=True)
-class LayoutsTask:
-    """One method and seed on every evaluated layout."""
-
-    method: str
-    seed: int
-    sources: tuple[Source, ...]
-    fail_probs: tuple[float, ...]
-    episodes: int  # per layout × fail_prob
-    executor: ExecutorConfig  # its arm's planner
-    model: Any  # None for the symbolic reference
-    meta: dict
-    epsilon: float  # online methods' exploration
+def layout_rows(task, batch, episodes) -> list[dict]:
+    """One row per episode of a layout's batch (``batch.key``: the layout's source and the episodes per
+    fail_prob), for :func:`hnsdt.evaluation.evaluate.evaluate_run`."""
+    src, per_fail_prob = batch.key
+    return [{"method": task.method, "seed": task.seed, "split": src.split, "layout": src.name,
+             "fail_prob": float(batch.fail_prob[i]), "episode": i % per_fail_prob, "success": bool(ep.success),
+             "steps": ep.length, "reward": round(ep.ret, 6)} for i, ep in enumerate(episodes)]
 
 
-def evaluate_run(task: LayoutsTask) -> list[dict]:
-    """Every layout × fail_prob of one method and seed: one row per episode. A layout's episodes at every
-    failure probability run as one batch (copies with their own fail_prob): one agent call per step for all."""
-    from hnsdt.agents.rollout import rollout
-    from hnsdt.envs.vector import KeyDoorVectorEnv
-    from hnsdt.evaluation.evaluate import build_agent
+def layout_batches(seed: int, sources: tuple[Source, ...], fail_probs: tuple[float, ...], episodes: int) -> tuple:
+    """One batch per layout: its episodes at every failure probability run together (copies with their own
+    fail_prob), one agent call per step for all."""
+    from hnsdt.evaluation.evaluate import Batch
 
-    per_copy = np.repeat(np.asarray(task.fail_probs, dtype=np.float64), task.episodes)
-    rows = []
-    for li, src in enumerate(task.sources):
-        env_seed = episode_seed(task.seed, li)
-        agent = build_agent(task.method, src.layout, task.executor, task.model, task.meta, task.epsilon, env_seed + 1)
-        eps = rollout(KeyDoorVectorEnv(len(per_copy), src.layout, per_copy, src.max_steps), agent, seed=env_seed)
-        for i, ep in enumerate(eps):
-            rows.append({"method": task.method, "seed": task.seed, "split": src.split, "layout": src.name,
-                         "fail_prob": float(per_copy[i]), "episode": i % task.episodes, "success": bool(ep.success),
-                         "steps": ep.length, "reward": round(ep.ret, 6)})
-    return rows
+    per_copy = tuple(float(p) for p in np.repeat(np.asarray(fail_probs, dtype=np.float64), episodes))
+    return tuple(Batch(src.layout, src.max_steps, len(per_copy), per_copy, episode_seed(seed, li), (src, episodes))
+                 for li, src in enumerate(sources))
 
 
 def evaluate(params: Params, models_root: str | Path, out_dir: str | Path, compute=None,
              progress: bool = True) -> pd.DataFrame:
     """Run every method × seed on every evaluated layout; write ``episodes.csv`` and ``summary.csv``."""
     from hnsdt.compute import Compute, run_tasks
+    from hnsdt.evaluation.evaluate import EvalTask, evaluate_run
     from hnsdt.fileio import atomic_dir
     from hnsdt.models.checkpoint import load_checkpoint
 
@@ -280,9 +263,10 @@ def evaluate(params: Params, models_root: str | Path, out_dir: str | Path, compu
                     raise ValueError(f"{path} is not a view model (train it with `python pipeline/generalisation.py "
                                      f"train --method {method}`)")
                 eps = eval_epsilon(params, method)
-            tasks.append(LayoutsTask(method, seed, sources, fps, g.episodes, executor, model, meta, eps))
+            tasks.append(EvalTask(method, seed, executor, model, meta, eps,
+                                  layout_batches(seed, sources, fps, g.episodes), layout_rows))
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
-    table = pd.DataFrame([row for rows in results for row in rows])
+    table = pd.DataFrame([row for batches in results for rows in batches for row in rows])
     optimal = {(s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fps}
     table["optimal_steps"] = [optimal[(n, fp)][0] for n, fp in zip(table["layout"], table["fail_prob"])]
     with atomic_dir(Path(out_dir)) as tmp:

@@ -14,7 +14,7 @@ from conftest import REPO
 REPO = Path(REPO)
 sys.path.insert(0, str(REPO / "tools"))
 
-from readme_results import BEGIN, END, render, results_table  # noqa: E402
+from readme_results import BEGIN, END, HEADLINE, headline_table, render, results_table  # noqa: E402
 
 
 def test_the_readme_results_table_matches_the_committed_summary():
@@ -33,3 +33,15 @@ def test_the_check_fails_when_a_number_changes():
     with pytest.raises(ValueError, match="marker"):
         render(readme.replace(BEGIN, ""), "")
     assert END in readme
+
+
+def test_the_headline_table_follows_the_headline_metrics():
+    import json
+
+    headline = json.loads((REPO / "metrics/headline.json").read_text())
+    readme = (REPO / "README.md").read_text()
+    assert render(readme, headline_table(headline), HEADLINE) == readme
+    method = next(m for m in headline["keydoor"] if m != "hnsdt_steps_ratio")
+    headline["keydoor"][method] = 0.123
+    table = headline_table(headline)
+    assert "0.123" in table and render(readme, table, HEADLINE) != readme

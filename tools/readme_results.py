@@ -1,14 +1,17 @@
-"""The README's results table, generated from the evaluation summary that git keeps (`metrics/summary.csv`).
+"""The README's results tables, generated from the files of the run that git keeps: the per-cell table from
+the evaluation summary (`metrics/summary.csv`), the headline table from `metrics/headline.json`.
 
 Usage: python tools/readme_results.py [--check]
-Rewrites the table between the `<!-- results:begin -->` and `<!-- results:end -->` markers of README.md, or
-with --check exits 1 (one line) when the README's table is not the one the committed summary gives.
-``tests/test_readme.py`` runs the check, so the README cannot silently disagree with the run.
+Rewrites the tables between the `<!-- results:begin -->` / `<!-- results:end -->` and `<!-- headline:begin -->` /
+`<!-- headline:end -->` markers of README.md, or with --check exits 1 (one line) when the README's tables are
+not the ones the committed files give. ``tests/test_readme.py`` runs the check, so the README cannot silently
+disagree with the run.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -20,7 +23,9 @@ sys.path.insert(0, str(ROOT))
 from hnsdt.methods import METHODS  # noqa: E402
 
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
+HEADLINE = "<!-- headline:begin -->", "<!-- headline:end -->"
 CASES = {"keydoor": "Case 1 keydoor", "multikeydoor": "Case 2 multikeydoor"}
+SPLITS = {"heldout": "held-out maps", "minigrid": "MiniGrid grids"}
 
 
 def _rate(mean: float, std: float) -> str:
@@ -48,24 +53,41 @@ def results_table(summary: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
-def render(readme: str, table: str) -> str:
-    if readme.count(BEGIN) != 1 or readme.count(END) != 1:
-        raise ValueError(f"README.md needs exactly one {BEGIN} and one {END} marker")
-    head, rest = readme.split(BEGIN)
-    _, tail = rest.split(END)
-    return f"{head}{BEGIN}\n{table}\n{END}{tail}"
+def headline_table(headline: dict) -> str:
+    """Success per method (rows) and split (columns), and HNSDT's steps / optimum, from the headline metrics."""
+    splits = list(headline)
+    methods = [m for m in METHODS if any(m in headline[s] for s in splits)]
+    lines = ["| method | " + " | ".join(CASES.get(s, SPLITS.get(s, s)) for s in splits) + " |",
+             "|---|" + "---|" * len(splits)]
+    for method in methods:
+        cells = [f"{headline[s][method]:.3f}" if headline[s].get(method) is not None else "–" for s in splits]
+        lines.append(f"| {METHODS[method].label} | " + " | ".join(cells) + " |")
+    ratios = [headline[s].get("hnsdt_steps_ratio") for s in splits]
+    lines.append("| HNSDT steps / optimum | " + " | ".join("–" if r is None else f"{r:.2f}×" for r in ratios) + " |")
+    return "\n".join(lines)
+
+
+def render(readme: str, table: str, markers: tuple[str, str] = (BEGIN, END)) -> str:
+    begin, end = markers
+    if readme.count(begin) != 1 or readme.count(end) != 1:
+        raise ValueError(f"README.md needs exactly one {begin} and one {end} marker")
+    head, rest = readme.split(begin)
+    _, tail = rest.split(end)
+    return f"{head}{begin}\n{table}\n{end}{tail}"
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--check", action="store_true", help="only check; exit 1 when the README differs")
     args = parser.parse_args()
-    readme_path, summary_path = ROOT / "README.md", ROOT / "metrics/summary.csv"
+    readme_path, summary_path, headline_path = (ROOT / "README.md", ROOT / "metrics/summary.csv",
+                                                ROOT / "metrics/headline.json")
     readme = readme_path.read_text()
     wanted = render(readme, results_table(pd.read_csv(summary_path)))
+    wanted = render(wanted, headline_table(json.loads(headline_path.read_text())), HEADLINE)
     if args.check:
         if wanted != readme:
-            print(f"README.md: the results table differs from {summary_path.relative_to(ROOT)}; run "
+            print("README.md: a results table differs from metrics/summary.csv or metrics/headline.json; run "
                   "`python tools/readme_results.py`", file=sys.stderr)
             return 1
         return 0

@@ -1,7 +1,8 @@
 """Evaluation: every method × env × fail_prob × seed, N episodes each, batched over environment copies.
 
-One :class:`EvalTask` per method × env × seed (:func:`evaluate_run`) runs its fail_probs' cells and returns
-table rows, touching no file, so any executor (:mod:`hnsdt.compute`) can run it; :func:`evaluate_all` loads the
+One :class:`EvalTask` per method × env × seed (:func:`evaluate_run`, shared with the unseen-layout experiment)
+runs its fail_probs' cells as batches and returns table rows, touching no file, so any executor
+(:mod:`hnsdt.compute`) can run it; :func:`evaluate_all` loads the
 checkpoints, runs the tasks and writes the tables and recordings.
 
 Metrics follow the paper: success rate, mean steps of the successful episodes, mean reward (episode return);
@@ -13,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import pandas as pd
@@ -209,36 +210,61 @@ def metrics_json(summ: pd.DataFrame) -> dict:
 
 
 @dataclass(frozen=True)
-class EvalTask:
-    """One method × env × seed of the evaluation, with its trained model."""
+class Batch:
+    """One rollout of a method: ``copies`` copies of one layout, with one failure probability for all or one per
+    copy, from one environment seed (the agent draws from ``seed + 1``). ``key`` is what the experiment's rows
+    need to know about the batch (the paper protocol: its :class:`Cell`; unseen layouts: the layout's split)."""
 
-    method: str
-    env: str
-    seed: int
-    fail_probs: tuple[float, ...]
     layout: Layout
     max_steps: int
-    episodes: int  # per fail_prob
+    copies: int
+    fail_prob: float | tuple[float, ...]
+    seed: int
+    key: Any
+
+
+@dataclass(frozen=True)
+class EvalTask:
+    """One method and training seed of an evaluation: its trained model and every batch it runs. ``rows`` (a
+    module-level function, so any executor can ship it) turns a batch's episodes into the experiment's rows:
+    ``rows(task, batch, episodes)``. Both experiments run through :func:`evaluate_run`; they differ in the
+    batches they plan and the rows they write."""
+
+    method: str
+    seed: int
     executor: ExecutorConfig  # its arm's planner
     model: Any  # None for the symbolic method
     meta: dict  # the checkpoint's facts
     epsilon: float  # online methods' exploration
-    log_episodes: int  # the first this many episodes of each cell come back whole (recordings)
+    batches: tuple[Batch, ...]
+    rows: Callable[..., Any]
+    log_episodes: int = 0  # the paper protocol: the first this many episodes of each cell come back whole
 
 
-def evaluate_run(task: EvalTask):
-    """The cells of one method × env × seed, one per fail_prob: for each, ``(episode rows, segment rows, its
-    first log_episodes episodes)``."""
-    out = []
-    layout = task.layout
-    for fi, fail_prob in enumerate(task.fail_probs):
-        cell = Cell(task.method, task.env, fail_prob, task.seed)
-        agent = build_agent(task.method, layout, task.executor, task.model, task.meta, task.epsilon,
-                            cell_seed(cell, fi) + 1)
-        eps = run_cell(cell, fi, layout, task.max_steps, task.episodes, agent)
-        out.append((episode_rows(cell, eps, layout, task.executor), segment_rows(cell, eps, _navigator(layout)),
-                    eps[:task.log_episodes]))
-    return out
+def run_batch(task: EvalTask, batch: Batch) -> list[Episode]:
+    agent = build_agent(task.method, batch.layout, task.executor, task.model, task.meta, task.epsilon,
+                        batch.seed + 1)
+    fail_prob = np.asarray(batch.fail_prob, dtype=np.float64) if isinstance(batch.fail_prob, tuple) else batch.fail_prob
+    return rollout(KeyDoorVectorEnv(batch.copies, batch.layout, fail_prob, batch.max_steps), agent, seed=batch.seed)
+
+
+def evaluate_run(task: EvalTask) -> list:
+    """Every batch of the task, in order: ``task.rows`` of each."""
+    return [task.rows(task, batch, run_batch(task, batch)) for batch in task.batches]
+
+
+def cell_outputs(task: EvalTask, batch: Batch, episodes: list[Episode]):
+    """The paper protocol's rows of one cell: ``(episode rows, segment rows, its first log_episodes episodes)``."""
+    cell = batch.key
+    return (episode_rows(cell, episodes, batch.layout, task.executor),
+            segment_rows(cell, episodes, _navigator(batch.layout)), episodes[:task.log_episodes])
+
+
+def cell_batches(method: str, env: str, seed: int, fail_probs, layout: Layout, max_steps: int,
+                 episodes: int) -> tuple[Batch, ...]:
+    """The paper protocol's batches of one method × env × seed: one cell per fail_prob, ``episodes`` copies."""
+    cells = [(fi, Cell(method, env, fp, seed)) for fi, fp in enumerate(fail_probs)]
+    return tuple(Batch(layout, max_steps, episodes, cell.fail_prob, cell_seed(cell, fi), cell) for fi, cell in cells)
 
 
 def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], models_root: str | Path,
@@ -275,9 +301,10 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
             params_count[f"{env}/{method}"] = sum(p.numel() for p in model.parameters())
             usage.append(training_usage(models_root, env, method, seed))
         log = settings.log_episodes if seed == settings.seeds[0] else 0
-        tasks.append(EvalTask(method, env, seed, settings.fail_probs, envs[env].layout, envs[env].max_steps,
-                              settings.episodes, executors[lookup_method(method).arm], model, meta,
-                              settings.eval_epsilon.get(method, 0.0), log))
+        batches = cell_batches(method, env, seed, settings.fail_probs, envs[env].layout, envs[env].max_steps,
+                               settings.episodes)
+        tasks.append(EvalTask(method, seed, executors[lookup_method(method).arm], model, meta,
+                              settings.eval_epsilon.get(method, 0.0), batches, cell_outputs, log))
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate", progress=progress)
     with atomic_dir(out) as tmp, atomic_dir(rec_out) as rec_tmp:
         tmp.mkdir()
