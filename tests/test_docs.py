@@ -53,3 +53,8 @@ def test_the_link_check_can_fail(tmp_path):
     assert links(page) == ["page.md#title", "nowhere.md", "page.md#nope"]
     assert "title" in anchors(page) and "nope" not in anchors(page)
     assert not (page.parent / "nowhere.md").exists()
+    with pytest.raises(AssertionError, match="points to nothing"):  # the check itself, on a page with a bad link
+        test_every_relative_link_resolves(page)
+    page.write_text("# Title\n[anchor](page.md#nope)\n")
+    with pytest.raises(AssertionError, match="no such heading"):
+        test_every_relative_link_resolves(page)
