@@ -26,7 +26,8 @@ pin_process()
 import numpy as np  # noqa: E402
 
 
-def run(method, env, seed, epochs, keep, params_path, episodes, fail_probs):
+def run(task):
+    method, env, seed, epochs, keep, params_path, episodes, fail_probs = task
     from dataclasses import replace
     from pathlib import Path
 

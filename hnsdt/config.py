@@ -103,8 +103,8 @@ def collect_config(params: Params, name: str) -> CollectConfig:
     )
 
 
-def model_config(params: Params, env_name: str, condition: str):
-    """The decision transformer of ``models.<env>`` for one conditioning."""
+def model_config(params: Params, env_name: str, method: str):
+    """The decision transformer of ``models.<env>`` for one method (its conditioning and formulation)."""
     from hnsdt.models.dt import DTConfig
 
     env = env_spec(params, env_name)
@@ -112,7 +112,8 @@ def model_config(params: Params, env_name: str, condition: str):
         raise params.error(f"missing key models.{env_name} (the decision transformers' size on that env)")
     sizes = params.models[env_name]
     try:
-        return DTConfig(condition=condition, n_flags=env.layout.n_flags, grid_h=env.layout.shape[0],
+        return DTConfig(condition=METHODS[method].condition, formulation=train_settings(params).formulation[method],
+                        n_flags=env.layout.n_flags, grid_h=env.layout.shape[0],
                         grid_w=env.layout.shape[1], dropout=params.need("train").dropout,
                         max_timestep=env.max_steps,
                         tokens=sizes.tokens, n_layers=sizes.n_layers, n_heads=sizes.n_heads,
@@ -131,6 +132,7 @@ class TrainSettings:
     config: Any  # the shared hnsdt.models.train.TrainConfig
     behaviours: dict[str, tuple[str, ...]]  # per method: the collected episodes it learns from (empty = all)
     loss: dict[str, str]  # per method: the window steps its loss counts
+    formulation: dict[str, str]  # per method: its examples, windows or whole episodes (hnsdt.models.dt)
 
     def method_config(self, method: str, seed: int):
         """The training config of one method and seed."""
@@ -138,7 +140,7 @@ class TrainSettings:
 
 
 def train_settings(params: Params) -> TrainSettings:
-    from hnsdt.models.windows import LOSS_STEPS
+    from hnsdt.models.windows import FORMULATIONS, LOSS_STEPS
     from hnsdt.models.train import TrainConfig
 
     train = params.need("train")
@@ -149,7 +151,8 @@ def train_settings(params: Params) -> TrainSettings:
         config=TrainConfig(epochs=train.epochs, batch_size=train.batch_size, lr=float(train.lr),
                            max_steps=train.max_steps, device=train.device),
         behaviours={m: tuple(train.behaviours.get(m, [])) for m in DT_METHODS},
-        loss={m: train.loss.get(m, LOSS_STEPS[0]) for m in DT_METHODS})
+        loss={m: train.loss.get(m, LOSS_STEPS[0]) for m in DT_METHODS},
+        formulation={m: train.formulation.get(m, FORMULATIONS[0]) for m in DT_METHODS})
 
 
 def fill(params: Params, key: str, cls, section: dict, **fixed):

@@ -151,6 +151,7 @@ def network_configs(params: Params, method: str, seed: int):
         try:
             cfg = view_config(entry.condition, lay.n_flags, g.view_radius, max_offset,
                               max_timestep=max(s.max_steps for s in sources), dropout=params.train.dropout,
+                              formulation=ts.formulation[method],
                               **models[g.family].model_dump())
         except ValueError as e:
             raise params.error(f"models.{g.family}: {e}") from None

@@ -14,7 +14,7 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
 
 from hnsdt.data.collect import POLICIES, STARTS
-from hnsdt.models.windows import LOSS_STEPS
+from hnsdt.models.windows import FORMULATIONS, LOSS_STEPS
 from hnsdt.envs.generate import FAMILIES
 from hnsdt.compute import EXECUTORS
 from hnsdt.methods import BASELINES, DT_METHODS, LEARNED, METHODS, OFFLINE_BASELINES, ONLINE_BASELINES
@@ -92,6 +92,8 @@ class TrainParams(Section):
     seeds: list[int] = Field(min_length=1, description="shared by every learned method and the evaluation")
     behaviours: dict[Literal[DT_METHODS], list[Literal[POLICIES]]] = Field(
         default_factory=dict, description="which collected episodes each DT learns from (absent: all)")
+    formulation: dict[Literal[DT_METHODS], Literal[FORMULATIONS]] = Field(
+        default_factory=dict, description="each DT's examples: windows (absent) or whole episodes")
     loss: dict[Literal[DT_METHODS], Literal[LOSS_STEPS]] = Field(
         default_factory=dict, description="the window steps the loss counts (absent: window)")
     epochs: PositiveInt = Field(description="passes over each method's training windows")

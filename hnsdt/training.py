@@ -49,7 +49,7 @@ def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: 
         ts = train_settings(params)
         if method not in ts.methods:
             raise ValueError(f"method {method!r} is not in train.methods {list(ts.methods)}")
-        model_cfg = model_config(params, env, METHODS[method].condition)
+        model_cfg = model_config(params, env, method)
         if model_cfg.condition == "subgoal":
             _check_operator_coverage(frames, params, env_spec(params, env), method, ts.behaviours[method])
         starts = np.unique(frames.episode_start)

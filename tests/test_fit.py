@@ -28,10 +28,14 @@ def frames(keydoor):
                               cat(lambda i, e: np.arange(e.length)))
 
 
-def _dt(frames, keydoor, **kw):
+def _dt(frames, keydoor, formulation="window", **kw):
     cfg = DTConfig("return", keydoor.n_flags, *keydoor.shape, context=4, n_layers=1, d_model=32, dropout=0.3,
-                   max_timestep=100)  # dropout: the resumed half must continue the torch stream too
+                   max_timestep=100, formulation=formulation)  # dropout: the resumed half continues the stream
     return train_dt(frames, cfg, TrainConfig(epochs=3, batch_size=32, seed=2, log_every=3), progress=False, **kw)
+
+
+def _episode_dt(frames, keydoor, **kw):
+    return _dt(frames, keydoor, "episode", **kw)
 
 
 def _rnn(frames, keydoor, **kw):
@@ -42,7 +46,7 @@ def _rnn(frames, keydoor, **kw):
     return out[:2] if isinstance(out, tuple) else out
 
 
-@pytest.mark.parametrize("train", [_dt, _rnn], ids=["decision_transformer", "lstm"])
+@pytest.mark.parametrize("train", [_dt, _episode_dt, _rnn], ids=["decision_transformer", "episodes", "lstm"])
 def test_a_run_stopped_and_continued_elsewhere_is_the_run_in_one_go(frames, keydoor, train):
     whole, whole_curve = train(frames, keydoor)
     state = train(frames, keydoor, stop_after=1)
@@ -97,3 +101,16 @@ def test_continued_tasks_come_back_in_task_order(workers):
     tasks = [("a", 3), ("b", 1), ("c", 2), ("d", 1), ("e", 2)]
     out = run_tasks(_countdown, tasks, Compute(workers=workers), progress=False)
     assert out == ["a done", "b done", "c done", "d done", "e done"]
+
+
+def test_episode_batches_hold_each_episode_once_and_close_at_the_batch_size():
+    from hnsdt.models.fit import Objective
+
+    sizes = np.array([5, 30, 2, 2, 9, 14, 1, 40])
+    objective = Objective(np.arange(8), None, None, None, sizes=sizes)
+    order = np.random.default_rng(0).permutation(8)
+    batches = objective.batches(order, 16)
+    assert np.array_equal(np.concatenate(batches), order)
+    assert all(sizes[b].sum() >= 16 for b in batches[:-1])  # each closes once it reaches the batch size ...
+    assert all(sizes[b[:-1]].sum() < 16 for b in batches)  # ... and not later
+    assert objective.steps_per_epoch(16) == 7

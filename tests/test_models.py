@@ -6,13 +6,13 @@ from hnsdt.agents import SymbolicAgent, rollout
 from hnsdt.agents.dt_agents import History, HNSDTAgent, _greedy
 from hnsdt.models.windows import frames_from_arrays, make_windows, window_ends
 from hnsdt.envs import KeyDoorVectorEnv
-from hnsdt.models.dt import DecisionTransformer, DTConfig
+from hnsdt.models.dt import NO_ACTION, DecisionTransformer, DTConfig
 from hnsdt.models.train import TrainConfig, load_checkpoint, save_checkpoint, train_dt
 
 
 def _cfg(condition, **kw):
-    return DTConfig(condition, n_flags=2, grid_h=5, grid_w=5, context=4, n_layers=2, n_heads=4, d_model=32,
-                    dropout=0.0, max_timestep=100, **kw)
+    return DTConfig(condition, n_flags=2, grid_h=5, grid_w=5, **{"context": 4, "n_layers": 2, "n_heads": 4,
+                    "d_model": 32, "dropout": 0.0, "max_timestep": 100} | kw)
 
 
 def _batch(cfg, B=3, seed=0):
@@ -166,3 +166,109 @@ def test_training_windows_cover_labelled_frames_only_for_hnsdt(keydoor):
     frames.subgoals[:3] = 0
     assert 0 not in frames.subgoals[window_ends(frames, "subgoal")]
     assert len(window_ends(frames, "return")) == len(frames)
+
+
+# -- the episode formulation: banded attention over whole episodes, a key/value cache at inference ---------
+
+def _episode(cfg, B=3, T=11, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    states = torch.stack([torch.randint(0, 5, (B, T), generator=g), torch.randint(0, 5, (B, T), generator=g),
+                          torch.randint(0, 2, (B, T), generator=g), torch.randint(0, 2, (B, T), generator=g)], -1)
+    return {"states": states, "actions": torch.randint(0, 5, (B, T), generator=g),
+            "timesteps": torch.arange(T).repeat(B, 1), "subgoal_ids": torch.randint(0, 30, (B, T), generator=g),
+            "subgoal_targets": torch.randint(-1, 5, (B, T, 2), generator=g), "returns": torch.randn(B, T, generator=g)}
+
+
+def _episode_cond(cfg, b, t=slice(None)):
+    if cfg.condition == "subgoal":
+        return {"subgoal_ids": b["subgoal_ids"][:, t], "subgoal_targets": b["subgoal_targets"][:, t]}
+    return {"returns": b["returns"][:, t]} if cfg.condition == "return" else {}
+
+
+@pytest.mark.parametrize("condition", ["subgoal", "return", "none"])
+def test_cached_steps_compute_what_the_whole_episode_pass_computes(condition):
+    """One token per step through the key/value cache gives every step's logits of the training pass (also past
+    the context, where the ring of cached steps wraps round); rows advance independently."""
+    cfg = _cfg(condition, formulation="episode")
+    torch.manual_seed(0)
+    model = DecisionTransformer(cfg).eval()
+    b = _episode(cfg)
+    with torch.no_grad():
+        full = model(b["states"], b["actions"], b["timesteps"], None, **_episode_cond(cfg, b))
+    assert full.shape == (3, 11, 5)
+    cache = model.start(3)
+    got = torch.zeros_like(full)
+    for t in range(11):
+        for rows in (torch.tensor([2]), torch.tensor([0, 1])):  # out of step within one time step
+            prev = torch.full((len(rows),), NO_ACTION) if t == 0 else b["actions"][rows, t - 1]
+            cond = {k: v[rows] for k, v in _episode_cond(cfg, b, t).items()}
+            got[rows, t] = model.step(cache, rows, b["states"][rows, t], prev, b["timesteps"][rows, t], **cond)
+    assert torch.allclose(got, full, atol=1e-5)
+
+
+def test_episode_attention_reaches_back_context_steps_per_layer():
+    """With one layer, step t reads steps t - h + 1 .. t: a change h steps back is invisible, h - 1 back is not."""
+    cfg = _cfg("return", formulation="episode", n_layers=1)
+    model = DecisionTransformer(cfg).eval()
+    b = _episode(cfg)
+    run = lambda b: model(b["states"], b["actions"], b["timesteps"], None, returns=b["returns"])  # noqa: E731
+    with torch.no_grad():
+        base = run(b)
+        for back, visible in ((cfg.context, False), (cfg.context - 1, True)):
+            changed = {k: v.clone() for k, v in b.items()}
+            changed["returns"][:, 9 - back] += 5.0
+            out = run(changed)
+            assert torch.allclose(out[:, 9], base[:, 9], atol=1e-6) != visible
+            assert torch.allclose(out[:, :9 - back], base[:, :9 - back], atol=1e-6)  # causal
+
+
+def test_episode_batches_supervise_every_labelled_step_once(keydoor):
+    from hnsdt.models.windows import episode_spans, make_episodes
+
+    frames = _expert_frames(keydoor, n=5)
+    frames.subgoals[:2] = 0
+    starts, lengths = episode_spans(frames)
+    batch = make_episodes(frames, starts, lengths, "subgoal")
+    assert batch["states"].shape[:2] == (5, lengths.max())
+    assert batch["loss_mask"].sum() == (frames.subgoals != 0).sum()
+    real = np.arange(lengths.max())[None] < lengths[:, None]
+    assert np.array_equal(batch["actions"][real], frames.actions)  # episodes in order, right-padded
+    assert np.array_equal(batch["subgoal_targets"][real], frames.targets)
+
+
+@pytest.mark.parametrize("condition", ["subgoal", "return"])
+def test_cached_agents_act_as_the_episode_pass_predicts(keydoor, condition):
+    """An agent's cached decisions are the argmax of the training pass over the episode it produced: states,
+    previous actions, timesteps and each step's own sub-goal / return-to-go reach the model as in training."""
+    from hnsdt.agents.dt_agents import make_agent
+
+    torch.manual_seed(1)
+    model = DecisionTransformer(DTConfig(condition, keydoor.n_flags, *keydoor.shape, context=3, n_layers=2,
+                                         d_model=32, max_timestep=100, formulation="episode")).eval()
+    agent = make_agent(model, {"target_return": 0.5}, keydoor, None)
+    eps = rollout(KeyDoorVectorEnv(4, keydoor, 0.3, 30), agent, seed=2)
+    for e in eps:
+        T = e.length
+        b = {"states": torch.from_numpy(e.states[None, :T]), "actions": torch.from_numpy(e.actions[None]),
+             "timesteps": torch.arange(T)[None]}
+        if condition == "subgoal":
+            b |= {"subgoal_ids": torch.from_numpy(e.subgoal_ids[None]),
+                  "subgoal_targets": torch.from_numpy(e.subgoal_targets[None])}
+        else:
+            b["returns"] = torch.from_numpy((0.5 - np.r_[0, np.cumsum(e.rewards)[:-1]])[None]).float()
+        with torch.no_grad():
+            predicted = model(b.pop("states"), b.pop("actions"), b.pop("timesteps"), None, **b)[0].argmax(-1).numpy()
+        acted = e.subgoal_ids > 0 if condition == "subgoal" else np.ones(T, bool)
+        assert acted.any() and np.array_equal(predicted[acted], e.actions[acted])
+
+
+@pytest.mark.learning
+def test_episode_hnsdt_overfits_a_tiny_dataset_and_then_acts_optimally(keydoor):
+    frames = _expert_frames(keydoor, n=48, fail_prob=0.1)
+    cfg = DTConfig("subgoal", keydoor.n_flags, *keydoor.shape, context=6, n_layers=2, d_model=64, dropout=0.0,
+                   max_timestep=100, formulation="episode")
+    model, curve = train_dt(frames, cfg, TrainConfig(epochs=150, max_steps=150, batch_size=128, lr=1e-3, seed=0),
+                            progress=False)
+    assert curve[-1]["loss"] < 0.15 < curve[0]["loss"] and curve[-1]["step"] == 150
+    eps = rollout(KeyDoorVectorEnv(32, keydoor, 0.0, 100), HNSDTAgent(keydoor, model), seed=1)
+    assert all(e.success for e in eps) and all(e.length == 14 for e in eps)

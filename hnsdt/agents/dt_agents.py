@@ -1,10 +1,11 @@
 """Agents driven by a decision transformer: HNSDT (planner + executor + DT controller) and the pure DT.
 
-Both keep, per environment copy, the last ``h`` steps of (state, action, timestep) as the model's window; the
-model sees it left-padded exactly as in training. Only copies that need a decision are run through the model,
-and identical windows only once: episodes of one cell start alike and stay alike until an action fails (at
-fail_prob 0 all of them), which saved 45% of the evaluation's time when measured. Actions are the argmax of the action
-distribution.
+How a model decides depends on its formulation (:mod:`hnsdt.models.dt`). Window: per environment copy, the
+last ``h`` steps of (state, action, timestep) as the model's window, left-padded exactly as in training; only
+copies that need a decision are run through the model, and identical windows only once (episodes of one cell
+start alike and stay alike until an action fails: at fail_prob 0 all of them; this saved 45% of the
+evaluation's time when measured). Episode: one new token per copy and step through the model's key/value
+cache. Actions are the argmax of the action distribution.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.agents.hierarchical import HierarchicalAgent
 from hnsdt.envs.keydoor import PICK
 from hnsdt.envs.layout import Layout
-from hnsdt.models.dt import DecisionTransformer
+from hnsdt.models.dt import NO_ACTION, DecisionTransformer
 
 
 class History:
@@ -64,32 +65,95 @@ def _greedy(model: DecisionTransformer, inputs: dict[str, np.ndarray]) -> np.nda
     return logits[:, -1].argmax(-1).cpu().numpy()[inverse.reshape(-1)]
 
 
+class WindowContext:
+    """The window formulation's decisions: the last h steps of each copy (:class:`History`), the whole window
+    through the model at every decision; returns-to-go kept per step of the window."""
+
+    def __init__(self, model: DecisionTransformer, states: np.ndarray):
+        self.model, h = model, model.cfg.context
+        self.history = History(states, h)
+        self.returns = np.zeros((len(states), h), dtype=np.float32)
+
+    def decide(self, rows: np.ndarray, subgoal_ids=None, subgoal_targets=None, returns=None) -> np.ndarray:
+        inputs = self.history.window(rows)
+        if subgoal_ids is not None:
+            inputs |= {"subgoal_ids": subgoal_ids[rows], "subgoal_targets": subgoal_targets[rows]}
+        if returns is not None:
+            self.returns[rows, -1] = returns[rows]
+            inputs["returns"] = self.returns[rows]
+        return _greedy(self.model, inputs)
+
+    def observe(self, rows: np.ndarray, actions, states: np.ndarray) -> None:
+        if actions is not None:
+            self.history.record_action(rows, np.asarray(actions))
+        self.returns[rows] = np.roll(self.returns[rows], -1, axis=1)
+        self.history.push(rows, states)
+
+
+class CachedContext:
+    """The episode formulation's decisions: one new token per copy and step through the model, attending to
+    its key/value cache of the last h − 1 steps (:meth:`DecisionTransformer.step`). Every live copy's step goes
+    through the model (the cache must hold each step), whether its action is used or not."""
+
+    def __init__(self, model: DecisionTransformer, states: np.ndarray):
+        self.model = model
+        self.device = next(model.parameters()).device
+        self.cache = model.start(len(states))
+        self.states = states.copy()
+        self.prev = np.full(len(states), NO_ACTION, dtype=np.int64)
+        self.t = np.zeros(len(states), dtype=np.int64)
+
+    def decide(self, rows: np.ndarray, subgoal_ids=None, subgoal_targets=None, returns=None) -> np.ndarray:
+        if len(rows) == 0:
+            return np.zeros(0, dtype=np.int64)
+        inputs = {"states": self.states[rows], "prev_actions": self.prev[rows], "timesteps": self.t[rows]}
+        if subgoal_ids is not None:
+            inputs |= {"subgoal_ids": subgoal_ids[rows], "subgoal_targets": subgoal_targets[rows]}
+        if returns is not None:
+            inputs["returns"] = returns[rows].astype(np.float32)
+        tensors = {k: torch.from_numpy(np.ascontiguousarray(v)).to(self.device) for k, v in inputs.items()}
+        logits = self.model.step(self.cache, torch.from_numpy(rows).to(self.device), **tensors)
+        return logits.argmax(-1).cpu().numpy()
+
+    def observe(self, rows: np.ndarray, actions, states: np.ndarray) -> None:
+        if actions is not None:
+            self.prev[rows] = np.asarray(actions)[rows]
+        self.t[rows] += 1
+        self.states[rows] = states[rows]
+
+
+def decision_context(model: DecisionTransformer, states: np.ndarray):
+    """How ``model`` decides: recomputing its window, or stepping its cache."""
+    return (CachedContext if model.cfg.formulation == "episode" else WindowContext)(model, states)
+
+
 class HNSDTAgent(HierarchicalAgent):
     """The paper's method: the symbolic plan's current operator, as ψ(o), conditions the DT."""
 
     def __init__(self, layout: Layout, model: DecisionTransformer, config: ExecutorConfig | None = None):
         super().__init__(layout, config)
         self.model = model
-        self.history: History | None = None
+        self.context = None
 
     def reset(self, obs: np.ndarray) -> None:
         super().reset(obs)
-        self.history = History(self.model.model_states(self.layout, obs), self.model.cfg.context)
+        self.context = decision_context(self.model, self.model.model_states(self.layout, obs))
         self._live = np.ones(len(obs), dtype=bool)
 
     def low_level(self, obs: np.ndarray, subgoal_ids: np.ndarray, targets: np.ndarray) -> np.ndarray:
         actions = np.full(len(obs), PICK, dtype=np.int64)  # no operator (done or trapped): a harmless no-op
-        rows = np.flatnonzero((subgoal_ids > 0) & self._live)
+        # the window formulation decides only where an operator is active; the cache takes every live step
+        every = isinstance(self.context, CachedContext)
+        rows = np.flatnonzero(((subgoal_ids > 0) | every) & self._live)
         if len(rows):
-            actions[rows] = _greedy(self.model, self.history.window(rows) | {
-                "subgoal_ids": subgoal_ids[rows], "subgoal_targets": targets[rows]})
+            decided = self.context.decide(rows, subgoal_ids, targets)
+            use = subgoal_ids[rows] > 0
+            actions[rows[use]] = decided[use]
         return actions
 
     def observe(self, obs, active, actions=None, rewards=None) -> None:
         rows = np.flatnonzero(active)
-        if actions is not None:
-            self.history.record_action(rows, np.asarray(actions))
-        self.history.push(rows, self.model.model_states(self.layout, obs))
+        self.context.observe(rows, actions, self.model.model_states(self.layout, obs))
         self._live = np.asarray(active, bool).copy()
         super().observe(obs, active)
 
@@ -103,30 +167,23 @@ class PureDTAgent:
         self.target_return = float(target_return) if target_return is not None else None
 
     def reset(self, obs: np.ndarray) -> None:
-        h = self.model.cfg.context
-        self.history = History(self.model.model_states(self.layout, obs), h)
-        self.returns = np.zeros((len(obs), h), dtype=np.float32)
-        self.returns[:, -1] = self.target_return or 0.0
+        self.context = decision_context(self.model, self.model.model_states(self.layout, obs))
+        self.returns = np.full(len(obs), self.target_return or 0.0, dtype=np.float32)  # each copy's return-to-go
         self._live = np.ones(len(obs), dtype=bool)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         actions = np.full(len(obs), PICK, dtype=np.int64)
         rows = np.flatnonzero(self._live)
         if len(rows):
-            inputs = self.history.window(rows)
-            if self.target_return is not None:
-                inputs["returns"] = self.returns[rows]
-            actions[rows] = _greedy(self.model, inputs)
+            actions[rows] = self.context.decide(rows, returns=self.returns if self.target_return is not None
+                                                else None)
         return actions
 
     def observe(self, obs, active, actions=None, rewards=None) -> None:
         rows = np.flatnonzero(active)
-        if actions is not None:
-            self.history.record_action(rows, np.asarray(actions))
-        last = self.returns[rows, -1] - (np.asarray(rewards)[rows] if rewards is not None else 0.0)
-        self.returns[rows] = np.roll(self.returns[rows], -1, axis=1)
-        self.returns[rows, -1] = last
-        self.history.push(rows, self.model.model_states(self.layout, obs))
+        if rewards is not None:
+            self.returns[rows] = self.returns[rows] - np.asarray(rewards)[rows]  # (in the rewards' precision)
+        self.context.observe(rows, actions, self.model.model_states(self.layout, obs))
         self._live = np.asarray(active, bool).copy()
 
     def finish(self) -> None:

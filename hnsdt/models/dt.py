@@ -19,6 +19,18 @@ Two token layouts (``tokens``):
 * ``"interleaved"``: Chen et al.'s layout, one token per element: ``[g, s_1, a_1, ..., s_h]`` or
   ``[R_1, s_1, a_1, ..., R_h, s_h]``; every state token predicts its action.
 
+Two formulations (``formulation``) of what one training example and one decision are:
+
+* ``"window"`` (the paper's, Appendix C): an example is a window of the last h steps ending at a frame, cut
+  anew for every frame, so a step is recomputed in up to h windows; each decision recomputes the whole window.
+  The sub-goal token leads the window and conditions every step in it.
+* ``"episode"``: an example is a whole episode, attention limited to the last h steps by a banded causal mask
+  (sliding-window attention), so every step's prediction comes out of one pass and each step is computed once;
+  at inference a key/value cache of the last h steps makes a decision one new token
+  (:meth:`DecisionTransformer.step`). Each step token carries its own conditioning (its sub-goal and target,
+  or its return-to-go) instead of one leading token; a step sees h steps back per layer, so through L layers
+  information reaches L·(h − 1) steps back, where a window cuts it at h. ``"step"`` tokens only.
+
 States are integer vectors (row, col, flags): row and column have embedding tables, flags a linear map. Every
 token of step k also gets the embedding of its episode timestep. The action head is a categorical over the 5
 actions; training minimises its negative log-likelihood.
@@ -34,6 +46,7 @@ import torch.nn.functional as F
 
 from hnsdt.envs.dynamics import N_ACTIONS  # the world's actions (the Actions enum), the head's outputs
 from hnsdt.models.network import Network
+from hnsdt.models.windows import FORMULATIONS
 from hnsdt.symbolic.subgoals import VOCAB_SIZE
 
 CONDITIONS = ("subgoal", "return", "none")
@@ -55,12 +68,18 @@ class DTConfig:
     max_timestep: int = 256
     return_scale: float = 10.0  # returns-to-go are divided by this before embedding
     tokens: str = "step"  # "step" = one token per step (state + previous action); "interleaved" = one per element
+    formulation: str = "window"  # "window" = an example per frame (its last h steps); "episode" = whole episodes,
+    #                              attention banded to h steps, a key/value cache at inference
 
     def __post_init__(self):
         if self.condition not in CONDITIONS:
             raise ValueError(f"condition must be one of {CONDITIONS}, got {self.condition!r}")
         if self.tokens not in TOKEN_LAYOUTS:
             raise ValueError(f"tokens must be one of {TOKEN_LAYOUTS}, got {self.tokens!r}")
+        if self.formulation not in FORMULATIONS:
+            raise ValueError(f"formulation must be one of {FORMULATIONS}, got {self.formulation!r}")
+        if self.formulation == "episode" and self.tokens != "step":
+            raise ValueError("formulation 'episode' needs tokens 'step' (one token per step)")
         if self.d_model % self.n_heads:
             raise ValueError(f"d_model {self.d_model} is not divisible by n_heads {self.n_heads}")
 
@@ -111,8 +130,55 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         flags = states[..., 2:].float() if self.cfg.n_flags else states[..., :1].float() * 0
         return self.row_emb(states[..., 0]) + self.col_emb(states[..., 1]) + self.flag_proj(flags)
 
+    def subgoal_targets(self, states: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+        """The target cells the sub-goal embedding reads, given the agent's states at the same steps (here: the
+        absolute cells; the view networks make them relative to the agent)."""
+        return targets
+
+    def embed_subgoals(self, ids: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+        tgt = targets + 1  # -1 (none) -> 0
+        return self.subgoal_emb(ids) + self.target_row_emb(tgt[..., 0]) + self.target_col_emb(tgt[..., 1])
+
+    def step_tokens(self, states, prev_actions, timesteps, subgoal_ids=None, subgoal_targets=None, returns=None):
+        """The episode formulation's token of each step: state + previous action + timestep + its own
+        conditioning (sub-goal and target, or return-to-go)."""
+        cfg = self.cfg
+        x = (self.embed_states(states) + self.action_emb(prev_actions)
+             + self.time_emb(timesteps.clamp(0, cfg.max_timestep)) + self.type_emb.weight[0])
+        if cfg.condition == "subgoal":
+            x = x + self.embed_subgoals(subgoal_ids, self.subgoal_targets(states, subgoal_targets))
+        elif cfg.condition == "return":
+            x = x + self.return_proj(returns[..., None] / cfg.return_scale)
+        return x
+
+    def forward_episode(self, states, actions, timesteps, subgoal_ids=None, subgoal_targets=None, returns=None):
+        """Action logits (B, T, 5) of whole episodes (right-padded: causal attention never reads a later pad);
+        subgoal_ids (B, T), subgoal_targets (B, T, 2), returns (B, T): each step's own."""
+        prev = torch.full_like(actions, NO_ACTION)
+        prev[:, 1:] = actions[:, :-1]
+        x = self.step_tokens(states, prev, timesteps, subgoal_ids, subgoal_targets, returns)
+        x = self.blocks(self.drop(x), mask=band_mask(x.shape[1], self.cfg.context, x.device))
+        return self.head(self.norm(x))
+
+    def start(self, n: int) -> "StepCache":
+        """An empty key/value cache for ``n`` episodes (episode formulation, eval mode)."""
+        return StepCache(self, n)
+
+    @torch.no_grad()
+    def step(self, cache: "StepCache", rows, states, prev_actions, timesteps, subgoal_ids=None,
+             subgoal_targets=None, returns=None) -> torch.Tensor:
+        """Action logits (len(rows), 5) of the next step of episodes ``rows``: one token each through every
+        layer, attending to the cached keys and values of their last h − 1 steps; the same numbers as
+        :meth:`forward_episode` on the whole episode (tested)."""
+        x = self.step_tokens(states, prev_actions, timesteps, subgoal_ids, subgoal_targets, returns)
+        slot, valid = cache.advance(rows)
+        for i, layer in enumerate(self.blocks.layers):
+            x = cached_layer(layer, x, cache.keys[i], cache.values[i], rows, slot, valid)
+        return self.head(self.norm(x))
+
     def forward(self, states, actions, timesteps, pad, subgoal_ids=None, subgoal_targets=None, returns=None):
-        """Action logits (B, h, 5), one per state of the window.
+        """Action logits (B, h, 5), one per state of the window (episode formulation: per step of the episode,
+        each conditioning argument per step, ``pad`` unused).
 
         states (B, h, d) int64; actions (B, h) int64 (the last one is never read); timesteps (B, h) int64;
         pad (B, h) bool marks steps before the episode began (windows are left-padded); subgoal_ids (B,) and
@@ -120,13 +186,14 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         Padded steps become a learned pad token, identically in training and at inference, so no attention mask
         is needed."""
         cfg = self.cfg
+        if cfg.formulation == "episode":
+            return self.forward_episode(states, actions, timesteps, subgoal_ids, subgoal_targets, returns)
         B, h = actions.shape
         time = self.time_emb(timesteps.clamp(0, cfg.max_timestep))
         keep = (~pad)[..., None].float()
         if cfg.condition == "subgoal":
-            tgt = subgoal_targets + 1  # -1 (none) -> 0
-            g = (self.subgoal_emb(subgoal_ids) + self.target_row_emb(tgt[:, 0]) + self.target_col_emb(tgt[:, 1])
-                 + self.type_emb.weight[2])
+            g = self.embed_subgoals(subgoal_ids, self.subgoal_targets(states[:, -1], subgoal_targets))
+            g = g + self.type_emb.weight[2]
         if cfg.tokens == "step":
             prev = torch.full_like(actions, NO_ACTION)
             prev[:, 1:] = torch.where(pad[:, :-1], NO_ACTION, actions[:, :-1])
@@ -155,8 +222,50 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         return self.head(self.norm(x[:, state_pos]))
 
     def loss(self, batch: dict) -> torch.Tensor:
-        logits = self(batch["states"], batch["actions"], batch["timesteps"], batch["pad"], batch.get("subgoal_ids"),
+        logits = self(batch["states"], batch["actions"], batch["timesteps"], batch.get("pad"), batch.get("subgoal_ids"),
                       batch.get("subgoal_targets"), batch.get("returns"))
         nll = F.cross_entropy(logits.reshape(-1, N_ACTIONS), batch["actions"].reshape(-1), reduction="none")
         mask = batch["loss_mask"].reshape(-1).float()
         return (nll * mask).sum() / mask.sum().clamp(min=1.0)
+
+
+def band_mask(n: int, context: int, device=None) -> torch.Tensor:
+    """(n, n) additive mask: step j attends to steps j − context < i ≤ j."""
+    i = torch.arange(n, device=device)
+    d = i[:, None] - i[None, :]
+    return torch.zeros(n, n, device=device).masked_fill((d < 0) | (d >= context), float("-inf"))
+
+
+class StepCache:
+    """Keys and values of each episode's last h steps, per layer, in a ring of h slots (attention does not care
+    about slot order: a step's position is in its own token, through the timestep embedding)."""
+
+    def __init__(self, model: DecisionTransformer, n: int):
+        cfg = model.cfg
+        device = next(model.parameters()).device
+        shape = (n, cfg.n_heads, cfg.context, cfg.d_model // cfg.n_heads)
+        self.keys = [torch.zeros(shape, device=device) for _ in range(cfg.n_layers)]
+        self.values = [torch.zeros(shape, device=device) for _ in range(cfg.n_layers)]
+        self.seen = torch.zeros(n, dtype=torch.long, device=device)  # steps each episode has put in the cache
+        self.context = cfg.context
+
+    def advance(self, rows: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The slot of each row's new step and which slots it attends to ((len(rows), h) bool)."""
+        t = self.seen[rows]
+        self.seen[rows] = t + 1
+        valid = torch.arange(self.context, device=t.device)[None, :] <= t[:, None]  # filled slots, this one too
+        return t % self.context, valid
+
+
+def cached_layer(layer: nn.TransformerEncoderLayer, x, keys, values, rows, slot, valid) -> torch.Tensor:
+    """One pre-norm encoder layer (eval mode) on one new token per row, its key and value written into the
+    cache: the same computation as ``layer`` on the whole sequence under :func:`band_mask`."""
+    attn = layer.self_attn
+    n, d = x.shape
+    heads = attn.num_heads
+    q, k, v = F.linear(layer.norm1(x), attn.in_proj_weight, attn.in_proj_bias).view(n, 3, heads, d // heads).unbind(1)
+    keys[rows, :, slot], values[rows, :, slot] = k, v
+    mask = torch.zeros(valid.shape, device=x.device).masked_fill(~valid, float("-inf"))[:, None, None, :]
+    out = F.scaled_dot_product_attention(q[:, :, None], keys[rows], values[rows], attn_mask=mask)
+    x = x + attn.out_proj(out.reshape(n, d))
+    return x + layer.linear2(layer.activation(layer.linear1(layer.norm2(x))))

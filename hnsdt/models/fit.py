@@ -44,6 +44,27 @@ class Objective:
     count: Callable[[np.ndarray], int]
     curve_row: Callable[[int, int, int, float], dict]
     clip_grad_norm: float = 0.0  # > 0: clip the gradient's norm to this before each step
+    sizes: np.ndarray | None = None  # per example, what it counts towards batch_size (episodes: their steps);
+    #                                  None: one each, so a batch is batch_size examples
+
+    def batches(self, order: np.ndarray, batch_size: int) -> list[np.ndarray]:
+        """One epoch's batches of the shuffled ``order``: slices of ``batch_size`` examples, or (``sizes``) runs
+        of consecutive examples each closed once its sizes reach ``batch_size``."""
+        if self.sizes is None:
+            return [order[b:b + batch_size] for b in range(0, len(order), batch_size)]
+        ends = []
+        total = 0
+        for i, size in enumerate(self.sizes[order]):
+            total += size
+            if total >= batch_size:
+                ends.append(i + 1)
+                total = 0
+        return [b for b in np.split(order, ends) if len(b)]
+
+    def steps_per_epoch(self, batch_size: int) -> int:
+        """Batches in an epoch (with ``sizes``: the expected count; each epoch's own can differ by a few)."""
+        n = len(self.examples) if self.sizes is None else int(self.sizes.sum())
+        return int(np.ceil(n / batch_size))
 
 
 def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_steps: int, batch_size: int,
@@ -66,21 +87,22 @@ def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_step
             torch.cuda.set_rng_state(state.cuda_rng)
         first, step, seen, recent, curve, rng = (state.epoch, state.step, state.seen, list(state.recent),
                                                  list(state.curve), state.rng)
-    steps_per_epoch = int(np.ceil(len(objective.examples) / batch_size))
-    total = epochs * steps_per_epoch
+    expected = epochs * objective.steps_per_epoch(batch_size)
+    total = expected if objective.sizes is None else float("inf")  # exact, or the epochs decide
     if max_steps:
         total = min(total, max_steps)
     end = epochs if stop_after is None else min(epochs, stop_after)
-    bar = tqdm(total=total, initial=step, desc=desc, disable=not progress, unit="step")
+    bar = tqdm(total=min(expected, total), initial=step, desc=desc, disable=not progress, unit="step")
     model.train()
+    last_epoch = first
     for epoch in range(first, end):
         if step >= total:
             break
-        order = rng.permutation(objective.examples)
-        for b in range(steps_per_epoch):
+        complete, last_epoch = True, epoch + 1
+        for rows in objective.batches(rng.permutation(objective.examples), batch_size):
             if step >= total:
+                complete = False
                 break
-            rows = order[b * batch_size:(b + 1) * batch_size]
             batch = {k: torch.from_numpy(np.ascontiguousarray(v)).to(device, non_blocking=True)
                      for k, v in objective.batch(rows).items()}
             loss = model.loss(batch)
@@ -97,13 +119,15 @@ def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_step
             if step % log_every == 0 or step == total:
                 curve.append(objective.curve_row(step, epoch + 1, seen, float(np.mean(recent))))
                 recent = []
-        if on_epoch is not None and step == (epoch + 1) * steps_per_epoch:  # a complete epoch
+        if on_epoch is not None and complete:
             on_epoch(epoch + 1, step, model)
     bar.close()
     if end < epochs and step < total:
         cuda = torch.cuda.get_rng_state() if device.type == "cuda" else None
         return FitState(end, step, seen, {k: v.cpu() for k, v in model.state_dict().items()},
                         _to_cpu(opt.state_dict()), torch.get_rng_state(), cuda, rng, recent, curve)
+    if recent:  # steps since the last row (a run whose epochs, not a step count, end it)
+        curve.append(objective.curve_row(step, last_epoch, seen, float(np.mean(recent))))
     model.eval()
     return model, curve
 

@@ -1,7 +1,7 @@
 """Offline training of a decision transformer on a LeRobot dataset, and its checkpoints.
 
-Adam, batch of windows, a fixed number of epochs over the training windows; CUDA when available, CPU
-otherwise. Same seed and thread count on CPU ⇒ same weights (the executor sets the threads). Checkpoints: :mod:`hnsdt.models.checkpoint`.
+Adam, batches of windows or of whole episodes (:func:`objective_for`), a fixed number of epochs; CUDA when
+available, CPU otherwise. Same seed and thread count on CPU ⇒ same weights (the executor sets the threads). Checkpoints: :mod:`hnsdt.models.checkpoint`.
 """
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from hnsdt.models.windows import Frames, make_windows, window_ends
+from hnsdt.models.windows import Frames, episode_spans, make_episodes, make_windows, window_ends
 from hnsdt.models.fit import FitState, Objective, fit
 from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint  # noqa: F401  (re-exported)
 from hnsdt.models.dt import DecisionTransformer, DTConfig
@@ -30,6 +30,34 @@ class TrainConfig:
     loss: str = "window"  # the window steps the loss counts: "window" or "last" (hnsdt.models.windows.make_windows)
 
 
+SEEN = {"window": "windows_seen", "episode": "steps_seen"}  # the training curve's count of examples, by formulation
+
+
+def objective_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig) -> Objective:
+    """What a decision transformer trains on: windows ending at every frame it learns (the window formulation)
+    or whole episodes, batched by their steps (the episode formulation)."""
+    seen = SEEN[model_cfg.formulation]
+    row = lambda step, epoch, n, loss: {"step": step, "epoch": epoch, seen: n, "loss": loss}  # noqa: E731
+    if model_cfg.formulation == "episode":
+        starts, lengths = episode_spans(frames, cfg.behaviours)
+        if model_cfg.condition == "subgoal":  # supervised steps: those with a sub-goal
+            count = np.r_[0, np.cumsum(frames.subgoals != 0)]
+            labelled = count[starts + lengths] - count[starts]
+            starts, lengths = starts[labelled > 0], lengths[labelled > 0]
+        if len(starts) == 0:
+            raise ValueError(f"no training episodes: no {model_cfg.condition} episodes from behaviours "
+                             f"{list(cfg.behaviours) or 'any'} in the dataset")
+        return Objective(np.arange(len(starts)),
+                         lambda rows: make_episodes(frames, starts[rows], lengths[rows], model_cfg.condition),
+                         lambda rows: int(lengths[rows].sum()), row, sizes=lengths)
+    ends = window_ends(frames, model_cfg.condition, cfg.behaviours)
+    if len(ends) == 0:
+        raise ValueError(f"no training windows: no {model_cfg.condition} frames from behaviours "
+                         f"{list(cfg.behaviours) or 'any'} in the dataset")
+    return Objective(ends, lambda rows: make_windows(frames, rows, model_cfg.context, model_cfg.condition,
+                                                     cfg.loss), len, row)
+
+
 def pick_device(name: str) -> torch.device:
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
@@ -46,13 +74,7 @@ def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bo
     epochs of a longer run is the model of an e-epoch run, as nothing here depends on the total).
     ``network``: the model class (a :class:`DecisionTransformer` or a subclass of it, e.g.
     :class:`hnsdt.models.view.ViewDecisionTransformer`)."""
-    ends = window_ends(frames, model_cfg.condition, cfg.behaviours)
-    if len(ends) == 0:
-        raise ValueError(f"no training windows: no {model_cfg.condition} frames from behaviours "
-                         f"{list(cfg.behaviours) or 'any'} in the dataset")
-    objective = Objective(
-        ends, lambda rows: make_windows(frames, rows, model_cfg.context, model_cfg.condition, cfg.loss), len,
-        lambda step, epoch, seen, loss: {"step": step, "epoch": epoch, "windows_seen": seen, "loss": loss})
+    objective = objective_for(frames, model_cfg, cfg)
     return fit(network, model_cfg, objective, epochs=cfg.epochs, max_steps=cfg.max_steps,
                batch_size=cfg.batch_size, lr=cfg.lr, seed=cfg.seed, device=pick_device(cfg.device),
                log_every=cfg.log_every, progress=progress, desc=desc, state=state, stop_after=stop_after,
@@ -70,7 +92,9 @@ def train_decision_transformer(frames: Frames, model_cfg: DTConfig, cfg: TrainCo
         return out
     model, curve = out
     used = np.isin(frames.policy, list(cfg.behaviours)) if cfg.behaviours else np.ones(len(frames), bool)
-    windows = len(window_ends(frames, model_cfg.condition, cfg.behaviours))
-    usage = {"dataset_frames": int(used.sum()), "windows_seen": curve[-1]["windows_seen"],
-             "gradient_steps": curve[-1]["step"], "epochs": round(curve[-1]["windows_seen"] / windows, 3)}
+    objective = objective_for(frames, model_cfg, cfg)
+    seen = curve[-1][SEEN[model_cfg.formulation]]
+    per_epoch = len(objective.examples) if objective.sizes is None else int(objective.sizes.sum())
+    usage = {"dataset_frames": int(used.sum()), SEEN[model_cfg.formulation]: seen,
+             "gradient_steps": curve[-1]["step"], "epochs": round(seen / per_epoch, 3)}
     return model, curve, usage

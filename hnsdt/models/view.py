@@ -7,7 +7,8 @@ Each class here is its method's network (:mod:`hnsdt.models.dt`, :mod:`hnsdt.mod
   identity: wall, floor, exit, key / door / item by letter, door open or closed) and the flags, never the
   absolute ``(row, col)``;
 * the decision transformer's sub-goal token carries the operator's target *relative to the agent's current
-  cell* (``target − (row, col)`` of the window's last step), not its absolute cell.
+  cell* (``target − (row, col)`` of the window's last step, or of each step in the episode formulation), not
+  its absolute cell.
 
 State vectors are ``row, col, view codes (row-major), flags`` (:func:`hnsdt.envs.observation.view_states`): the
 datasets' own ``observation.state`` and ``observation.view`` side by side. Row and column are kept only to make the targets relative, and never embedded. The registry names these classes as each method's ``view_network``.
@@ -94,12 +95,11 @@ class ViewDecisionTransformer(ViewModel, DecisionTransformer, arch="view_decisio
     def embed_states(self, states: torch.Tensor) -> torch.Tensor:
         return self.view(states)
 
-    def forward(self, states, actions, timesteps, pad, subgoal_ids=None, subgoal_targets=None, returns=None):
-        if subgoal_targets is not None:  # absolute target -> offset from the agent's current cell (-1: none)
-            m = self.cfg.max_offset
-            rel = (subgoal_targets - states[:, -1, :2]).clamp(-m, m) + m
-            subgoal_targets = torch.where(subgoal_targets < 0, -1, rel)
-        return super().forward(states, actions, timesteps, pad, subgoal_ids, subgoal_targets, returns)
+    def subgoal_targets(self, states: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+        """Absolute target -> offset from the agent's cell at that step (-1: none)."""
+        m = self.cfg.max_offset
+        rel = (targets - states[..., :2]).clamp(-m, m) + m
+        return torch.where(targets < 0, -1, rel)
 
 
 # -- recurrent controllers (LSTM hierarchical, GRU) -------------------------------------------------------

@@ -1,5 +1,6 @@
 """What the offline learners train on: a dataset's :class:`Frames` as numpy arrays, and the decision
-transformer's context windows cut from them.
+transformer's examples cut from them: context windows (the window formulation) or whole episodes (the episode
+formulation, :func:`make_episodes`).
 
 Windows are cut with numpy indexing: the same windows LeRobot's ``delta_timestamps`` gives, left-padded at
 episode starts, but built in milliseconds for a whole epoch instead of one ``__getitem__`` call per sample.
@@ -56,6 +57,7 @@ def window_ends(frames: Frames, condition: str, behaviours=()) -> np.ndarray:
     return np.flatnonzero(keep)
 
 
+FORMULATIONS = ("window", "episode")  # a decision transformer's examples: windows, or whole episodes
 LOSS_STEPS = ("window", "last")
 
 
@@ -92,4 +94,32 @@ def make_windows(frames: Frames, ends: np.ndarray, h: int, condition: str, loss:
         batch["loss_mask"] = ~pad
     if loss == "last":
         batch["loss_mask"][:, :-1] = False
+    return batch
+
+
+def episode_spans(frames: Frames, behaviours=()) -> tuple[np.ndarray, np.ndarray]:
+    """``(first frame, length)`` of every episode collected by one of ``behaviours`` (all when empty)."""
+    starts = np.flatnonzero(np.r_[True, frames.episode[1:] != frames.episode[:-1]])
+    lengths = np.diff(np.r_[starts, len(frames)])
+    if len(behaviours):
+        keep = np.isin(frames.policy[starts], list(behaviours))
+        starts, lengths = starts[keep], lengths[keep]
+    return starts, lengths
+
+
+def make_episodes(frames: Frames, starts: np.ndarray, lengths: np.ndarray, condition: str
+                  ) -> dict[str, np.ndarray]:
+    """Whole episodes, right-padded to the longest, with each step's own conditioning; the loss counts every
+    real step once (HNSDT: every step with a sub-goal)."""
+    steps = np.arange(lengths.max())
+    real = steps[None, :] < lengths[:, None]
+    idx = np.where(real, starts[:, None] + steps[None, :], starts[:, None])  # pads read the first frame
+    batch = {"states": frames.states[idx], "actions": frames.actions[idx], "timesteps": frames.timestep[idx],
+             "loss_mask": real}
+    if condition == "subgoal":
+        batch["subgoal_ids"] = frames.subgoals[idx]
+        batch["subgoal_targets"] = frames.targets[idx]
+        batch["loss_mask"] = real & (batch["subgoal_ids"] != 0)
+    elif condition == "return":
+        batch["returns"] = frames.returns_to_go[idx]
     return batch
