@@ -2,12 +2,13 @@
 
 Usage: python benchmarks/offline_budget.py [--env multikeydoor] [--epochs 1 2 4] [--seeds 0 1] [--episodes 100]
                                            [--methods pure_dt hnsdt lstm_hier gru hnsdt_paper pure_dt_paper]
-                                           [--fail-probs 0.1 0.3]
+                                           [--fail-probs 0.1 0.3] [--params params.yaml] [--validated]
 Trains each method on the pipeline's dataset (data/datasets/ENV; run `dvc repro` first) with the knobs of
 params.yaml but the budget: ``--epochs`` passes over its training data, no step cap. A decision transformer
 trains once for max(--epochs) and is copied after each listed epoch (the model after e epochs of a longer run
 is the model of an e-epoch run: no schedule depends on the total); a recurrent one trains once per budget.
-Every model is evaluated on the pipeline's cells at fail_prob 0.1 and 0.3 (--episodes each). Prints success
+With ``--validated`` each decision transformer trains instead to the plateau of the params' validation measure
+and the epoch it kept is printed. Every model is evaluated on the pipeline's cells at fail_prob 0.1 and 0.3 (--episodes each). Prints success
 and mean steps on success per budget, with gradient steps, the loss and, for plan-following methods, the share
 of sub-goals reached within their allowance. Runs go in parallel on the local
 executor, one thread each, as in the pipeline.
@@ -27,7 +28,7 @@ import numpy as np  # noqa: E402
 
 
 def run(task):
-    method, env, seed, epochs, keep, params_path, episodes, fail_probs = task
+    method, env, seed, epochs, keep, params_path, episodes, fail_probs, validated = task
     from dataclasses import replace
     from pathlib import Path
 
@@ -41,7 +42,12 @@ def run(task):
     (task,) = plan_runs(params, env, method, [seed], Path(f"data/datasets/{env}"))
     model_cfg, cfg, frames, facts = task.model_cfg, task.train_cfg, task.data, task.facts
     snaps = {}
-    if method in DT_METHODS:
+    if validated:  # the params' own budget: stopped by its validation measure (train.validation > 0)
+        from hnsdt.models.train import train_decision_transformer
+
+        model, curve, usage = train_decision_transformer(frames, model_cfg, cfg, progress=False)
+        snaps[usage.get("best_epoch", cfg.epochs)] = (usage["gradient_steps"], model)
+    elif method in DT_METHODS:
         model, curve = train_dt(frames, model_cfg, replace(cfg, epochs=max(epochs), max_steps=0), progress=False,
                                 on_epoch=lambda e, step, m: snaps.__setitem__(e, (step, copy.deepcopy(m)))
                                 if e in keep else None)
@@ -82,12 +88,20 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--fail-probs", type=float, nargs="+", default=[0.1, 0.3])
     ap.add_argument("--params", default="params.yaml")
+    ap.add_argument("--validated", action="store_true",
+                    help="decision transformers: train to the plateau of the params' validation measure "
+                         "(train.validation > 0; --epochs ignored) and report the epoch it kept")
     args = ap.parse_args()
     t = time.perf_counter()
-    tasks = [(m, args.env, s, args.epochs, set(args.epochs), args.params, args.episodes, args.fail_probs)
+    tasks = [(m, args.env, s, args.epochs, set(args.epochs), args.params, args.episodes, args.fail_probs,
+              args.validated)
              for m in args.methods for s in args.seeds]
     rows = [r for part in run_tasks(run, tasks, Compute(), desc="budgets") for r in part]
     table = pd.DataFrame(rows)
+    if args.validated:
+        print(table[table.fail_prob == table.fail_prob.min()][["method", "seed", "epochs", "steps"]].to_string(
+            index=False))
+        table["epochs"] = "validated"
     out = table.groupby(["method", "epochs", "fail_prob"]).agg(
         gradient_steps=("steps", "first"), loss=("loss", "mean"), success=("success", "mean"),
         success_min=("success", "min"), mean_steps=("mean_steps", "mean"),

@@ -133,10 +133,12 @@ class TrainSettings:
     behaviours: dict[str, tuple[str, ...]]  # per method: the collected episodes it learns from (empty = all)
     loss: dict[str, str]  # per method: the window steps its loss counts
     formulation: dict[str, str]  # per method: its examples, windows or whole episodes (hnsdt.models.dt)
+    budget: dict[str, dict]  # per method with a validation: its TrainConfig fields (validation, patience, epochs)
 
     def method_config(self, method: str, seed: int):
         """The training config of one method and seed."""
-        return replace(self.config, seed=seed, behaviours=self.behaviours[method], loss=self.loss[method])
+        return replace(self.config, seed=seed, behaviours=self.behaviours[method], loss=self.loss[method],
+                       **self.budget.get(method, {}))
 
 
 def train_settings(params: Params) -> TrainSettings:
@@ -152,7 +154,9 @@ def train_settings(params: Params) -> TrainSettings:
                            max_steps=train.max_steps, device=train.device),
         behaviours={m: tuple(train.behaviours.get(m, [])) for m in DT_METHODS},
         loss={m: train.loss.get(m, LOSS_STEPS[0]) for m in DT_METHODS},
-        formulation={m: train.formulation.get(m, FORMULATIONS[0]) for m in DT_METHODS})
+        formulation={m: train.formulation.get(m, FORMULATIONS[0]) for m in DT_METHODS},
+        budget={m: {"validation": float(v.share), "patience": v.patience, "epochs": v.max_epochs}
+                for m, v in train.validation.items()})
 
 
 def fill(params: Params, key: str, cls, section: dict, **fixed):

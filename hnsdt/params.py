@@ -86,6 +86,14 @@ class ModelParams(Section):
                         "return (hnsdt.models.dt checks it)")
 
 
+class ValidationParams(Section):
+    """Training that stops on evidence (hnsdt.models.fit.Validation)."""
+
+    share: float = Field(gt=0, lt=1, description="share of each behaviour's episodes held out")
+    patience: PositiveInt = Field(2, description="epochs without a lower held-out loss before stopping")
+    max_epochs: PositiveInt = Field(description="the cap")
+
+
 class TrainParams(Section):
     envs: list[str] = Field(min_length=1, description="keys of `envs`; every learned method trains on each")
     methods: list[Literal[DT_METHODS]] = Field(min_length=1, description="the decision transformers to train")
@@ -96,7 +104,10 @@ class TrainParams(Section):
         default_factory=dict, description="each DT's examples: windows (absent) or whole episodes")
     loss: dict[Literal[DT_METHODS], Literal[LOSS_STEPS]] = Field(
         default_factory=dict, description="the window steps the loss counts (absent: window)")
-    epochs: PositiveInt = Field(description="passes over each method's training windows")
+    epochs: PositiveInt = Field(description="passes over each method's training examples (methods without "
+                                "`validation`)")
+    validation: dict[Literal[DT_METHODS], ValidationParams] = Field(
+        default_factory=dict, description="per DT: train to the plateau of the loss on held-out episodes")
     max_steps: int = Field(0, ge=0, description="cap on gradient steps (0 = none)")
     batch_size: PositiveInt = 128
     lr: float = Field(1e-3, gt=0)

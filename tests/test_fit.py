@@ -114,3 +114,64 @@ def test_episode_batches_hold_each_episode_once_and_close_at_the_batch_size():
     assert all(sizes[b].sum() >= 16 for b in batches[:-1])  # each closes once it reaches the batch size ...
     assert all(sizes[b[:-1]].sum() < 16 for b in batches)  # ... and not later
     assert objective.steps_per_epoch(16) == 7
+
+
+def test_validation_stops_at_the_plateau_and_keeps_the_best_epoch(frames, keydoor):
+    """Measured after each epoch: 3.0, 2.0, 2.5, 2.4 with patience 2 -> stops after epoch 4 of 10, weights of 2."""
+    from hnsdt.models.fit import Validation
+
+    values = iter([3.0, 2.0, 2.5, 2.4, 1.0, 1.0])
+    snapshots = {}
+    validation = Validation(lambda model: next(values), patience=2)
+    cfg = DTConfig("return", keydoor.n_flags, *keydoor.shape, context=4, n_layers=1, d_model=32, max_timestep=100,
+                   formulation="episode")
+    model, curve = train_dt(frames, cfg, TrainConfig(epochs=10, batch_size=32, seed=2), progress=False,
+                            validation=validation, on_epoch=lambda e, step, m: snapshots.__setitem__(
+                                e, {k: v.clone() for k, v in m.state_dict().items()}))
+    assert [h["epoch"] for h in validation.history] == [1, 2, 3, 4] and validation.stopped_early
+    assert validation.best_epoch == 2 and curve[-1]["epoch"] == 4 and not model.training
+    for name, value in model.state_dict().items():
+        assert torch.equal(value, snapshots[2][name]), name
+
+
+def test_a_validated_run_stopped_and_continued_elsewhere_is_the_run_in_one_go(frames, keydoor):
+    """The validation record and the best epoch's weights travel in the state too."""
+    from hnsdt.models.train import train_decision_transformer
+
+    cfg = DTConfig("subgoal", keydoor.n_flags, *keydoor.shape, context=4, n_layers=1, d_model=32, dropout=0.3,
+                   max_timestep=100, formulation="episode")
+    tc = TrainConfig(epochs=6, batch_size=32, seed=2, log_every=3, validation=0.25, patience=1, lr=0.02)
+    whole, curve, usage = train_decision_transformer(frames, cfg, tc, progress=False)
+    state = train_decision_transformer(frames, cfg, tc, progress=False, stop_after=1)
+    assert isinstance(state, FitState) and len(state.validated) == 1 and state.best is not None
+    torch.manual_seed(123)
+    part, part_curve, part_usage = train_decision_transformer(frames, cfg, tc, progress=False,
+                                                              state=pickle.loads(pickle.dumps(state)))
+    assert part_curve == curve and part_usage == usage and usage["validation_frames"] > 0
+    assert usage["best_epoch"] == min(usage["validation_loss"], key=lambda h: h["value"])["epoch"]
+    for (name, a), b in zip(whole.state_dict().items(), part.state_dict().values()):
+        assert torch.equal(a, b), name
+
+
+def test_validation_episodes_are_a_share_of_each_behaviour_never_trained_on(frames, keydoor):
+    from hnsdt.models.train import objective_for, validation_episodes
+    from hnsdt.models.windows import episode_spans
+
+    mixed = frames_from_arrays(frames.states, frames.actions, frames.rewards, frames.subgoals, frames.targets,
+                               frames.episode, frames.timestep,
+                               np.where(frames.episode % 3 == 0, "random", "noisy_planner"))
+    held = validation_episodes(mixed, 0.25)
+    starts, _ = episode_spans(mixed)
+    for policy in ("random", "noisy_planner"):
+        mine = mixed.policy[starts] == policy
+        assert held[starts][mine].sum() == round(0.25 * mine.sum())
+    assert np.array_equal(held, validation_episodes(mixed, 0.25)) and not validation_episodes(mixed, 0.0).any()
+    for formulation in ("window", "episode"):
+        cfg = DTConfig("return", keydoor.n_flags, *keydoor.shape, context=4, formulation=formulation)
+        tc = TrainConfig(validation=0.25)
+        train, val = objective_for(mixed, cfg, tc), objective_for(mixed, cfg, tc, "validation")
+        if formulation == "window":  # examples: the frames windows end at
+            assert not held[train.examples].any() and held[val.examples].all()
+            assert len(train.examples) + len(val.examples) == len(mixed)
+        else:  # examples: episodes, their sizes their steps
+            assert train.sizes.sum() == (~held).sum() and val.sizes.sum() == held.sum()

@@ -1,7 +1,8 @@
 """The offline training loop of the decision transformers and the RNN baselines, resumable between epochs.
 
 Adam over shuffled batches of examples (window ends; whole episodes), a fixed number of epochs, optionally
-capped at a number of gradient steps. A run can stop after any complete epoch and hand back a
+capped at a number of gradient steps, or stopped at the plateau of a validation measure (:class:`Validation`).
+A run can stop after any complete epoch and hand back a
 :class:`FitState` — weights, optimiser moments, both random streams, counters — from which :func:`fit`
 continues, in this process or another, to the same bytes as an uninterrupted run (tested). The training
 stages use this to split every seed in two (:func:`hnsdt.training.train_run`), so that 5 seeds keep 2
@@ -32,6 +33,22 @@ class FitState:
     rng: np.random.Generator  # the batch order's stream
     recent: list[float] = field(default_factory=list)  # losses since the last curve row
     curve: list[dict] = field(default_factory=list)
+    validated: list[dict] = field(default_factory=list)  # Validation.history so far
+    best: tuple | None = None  # (value, epoch, weights) of the best validated epoch so far
+
+
+@dataclass
+class Validation:
+    """Training that stops on evidence: after every complete epoch ``measure(model)`` (lower is better; called in
+    eval mode, it must not draw random numbers) is recorded in ``history``; once it has not improved for
+    ``patience`` epochs training stops, and the model is the best epoch's (``best_epoch``). The epochs
+    :func:`fit` is given are the cap."""
+
+    measure: Callable[[torch.nn.Module], float]
+    patience: int
+    history: list[dict] = field(default_factory=list)  # {"epoch", "step", "value"} per validated epoch
+    best_epoch: int = 0
+    stopped_early: bool = False
 
 
 @dataclass
@@ -69,14 +86,17 @@ class Objective:
 
 def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_steps: int, batch_size: int,
         lr: float, seed: int, device: torch.device, log_every: int, progress: bool = True, desc: str = "train",
-        state: FitState | None = None, stop_after: int | None = None, on_epoch=None):
+        state: FitState | None = None, stop_after: int | None = None, on_epoch=None,
+        validation: Validation | None = None):
     """Train ``network(model_cfg)`` from scratch, or from ``state``; returns ``(model in eval mode, curve)``,
     or a :class:`FitState` when ``stop_after`` (a number of complete epochs) comes before the end.
     ``on_epoch(epoch, step, model)`` is called after each complete epoch and must neither change the model nor
-    draw random numbers."""
+    draw random numbers. ``validation``: stop at the plateau of a validation measure (:class:`Validation`,
+    which records what it measured)."""
     torch.manual_seed(seed)
     model = network(model_cfg).to(device)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
+    best = None
     if state is None:
         first, step, seen, recent, curve, rng = 0, 0, 0, [], [], np.random.default_rng(seed)
     else:  # the weights and streams where the earlier part stopped (construction above drew from the stream)
@@ -87,6 +107,9 @@ def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_step
             torch.cuda.set_rng_state(state.cuda_rng)
         first, step, seen, recent, curve, rng = (state.epoch, state.step, state.seen, list(state.recent),
                                                  list(state.curve), state.rng)
+        best = state.best
+        if validation is not None:
+            validation.history = list(state.validated)
     expected = epochs * objective.steps_per_epoch(batch_size)
     total = expected if objective.sizes is None else float("inf")  # exact, or the epochs decide
     if max_steps:
@@ -103,8 +126,7 @@ def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_step
             if step >= total:
                 complete = False
                 break
-            batch = {k: torch.from_numpy(np.ascontiguousarray(v)).to(device, non_blocking=True)
-                     for k, v in objective.batch(rows).items()}
+            batch = to_device(objective.batch(rows), device)
             loss = model.loss(batch)
             opt.zero_grad(set_to_none=True)
             loss.backward()
@@ -121,15 +143,49 @@ def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_step
                 recent = []
         if on_epoch is not None and complete:
             on_epoch(epoch + 1, step, model)
+        if validation is not None and complete:
+            model.eval()
+            with torch.no_grad():
+                value = float(validation.measure(model))
+            model.train()
+            validation.history.append({"epoch": epoch + 1, "step": step, "value": value})
+            if best is None or value < best[0]:
+                best = (value, epoch + 1, {k: v.detach().cpu().clone() for k, v in model.state_dict().items()})
+            elif epoch + 1 - best[1] >= validation.patience:
+                validation.stopped_early = True
+                break
     bar.close()
-    if end < epochs and step < total:
+    stopped = validation is not None and validation.stopped_early
+    if end < epochs and step < total and not stopped:
         cuda = torch.cuda.get_rng_state() if device.type == "cuda" else None
         return FitState(end, step, seen, {k: v.cpu() for k, v in model.state_dict().items()},
-                        _to_cpu(opt.state_dict()), torch.get_rng_state(), cuda, rng, recent, curve)
+                        _to_cpu(opt.state_dict()), torch.get_rng_state(), cuda, rng, recent, curve,
+                        list(validation.history) if validation is not None else [], best)
     if recent:  # steps since the last row (a run whose epochs, not a step count, end it)
         curve.append(objective.curve_row(step, last_epoch, seen, float(np.mean(recent))))
+    if best is not None:  # the best validated epoch's weights
+        model.load_state_dict(best[2])
+        validation.best_epoch = best[1]
     model.eval()
     return model, curve
+
+
+def to_device(arrays: dict[str, np.ndarray], device: torch.device) -> dict[str, torch.Tensor]:
+    return {k: torch.from_numpy(np.ascontiguousarray(v)).to(device, non_blocking=True) for k, v in arrays.items()}
+
+
+def mean_loss(objective: Objective, batch_size: int, device: torch.device) -> Callable[[torch.nn.Module], float]:
+    """A validation measure: the model's loss over every example of ``objective`` (in order), each supervised
+    step weighing the same."""
+    def measure(model) -> float:
+        total = count = 0.0
+        for rows in objective.batches(objective.examples, batch_size):
+            batch = to_device(objective.batch(rows), device)
+            n = float(batch["loss_mask"].sum())
+            total += float(model.loss(batch)) * n
+            count += n
+        return total / max(count, 1.0)
+    return measure
 
 
 def _to_cpu(obj):

@@ -12,7 +12,7 @@ import numpy as np
 import torch
 
 from hnsdt.models.windows import Frames, episode_spans, make_episodes, make_windows, window_ends
-from hnsdt.models.fit import FitState, Objective, fit
+from hnsdt.models.fit import FitState, Objective, Validation, fit, mean_loss
 from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint  # noqa: F401  (re-exported)
 from hnsdt.models.dt import DecisionTransformer, DTConfig
 
@@ -28,34 +28,69 @@ class TrainConfig:
     log_every: int = 10  # one training-curve row per this many steps
     behaviours: tuple[str, ...] = ()  # train on episodes of these collection behaviours (empty = all)
     loss: str = "window"  # the window steps the loss counts: "window" or "last" (hnsdt.models.windows.make_windows)
+    validation: float = 0.0  # > 0: this share of the episodes (of each behaviour) is held out, its loss measured
+    #                          after each epoch; training stops once it has not improved for `patience` epochs
+    #                          (`epochs` is then the cap) and keeps the best epoch's weights
+    patience: int = 2
 
 
 SEEN = {"window": "windows_seen", "episode": "steps_seen"}  # the training curve's count of examples, by formulation
 
 
-def objective_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig) -> Objective:
+def objective_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, part: str = "train") -> Objective:
     """What a decision transformer trains on: windows ending at every frame it learns (the window formulation)
-    or whole episodes, batched by their steps (the episode formulation)."""
+    or whole episodes, batched by their steps (the episode formulation). ``part``: the examples outside the
+    validation episodes (``train``) or in them (``validation``; :func:`validation_episodes`)."""
     seen = SEEN[model_cfg.formulation]
     row = lambda step, epoch, n, loss: {"step": step, "epoch": epoch, seen: n, "loss": loss}  # noqa: E731
+    held = validation_episodes(frames, cfg.validation)
+    if part == "train":
+        held = ~held
     if model_cfg.formulation == "episode":
         starts, lengths = episode_spans(frames, cfg.behaviours)
+        keep = held[starts]
         if model_cfg.condition == "subgoal":  # supervised steps: those with a sub-goal
             count = np.r_[0, np.cumsum(frames.subgoals != 0)]
-            labelled = count[starts + lengths] - count[starts]
-            starts, lengths = starts[labelled > 0], lengths[labelled > 0]
+            keep &= count[starts + lengths] - count[starts] > 0
+        starts, lengths = starts[keep], lengths[keep]
         if len(starts) == 0:
-            raise ValueError(f"no training episodes: no {model_cfg.condition} episodes from behaviours "
+            raise ValueError(f"no {part} episodes: no {model_cfg.condition} episodes from behaviours "
                              f"{list(cfg.behaviours) or 'any'} in the dataset")
         return Objective(np.arange(len(starts)),
                          lambda rows: make_episodes(frames, starts[rows], lengths[rows], model_cfg.condition),
                          lambda rows: int(lengths[rows].sum()), row, sizes=lengths)
     ends = window_ends(frames, model_cfg.condition, cfg.behaviours)
+    ends = ends[held[ends]]
     if len(ends) == 0:
-        raise ValueError(f"no training windows: no {model_cfg.condition} frames from behaviours "
+        raise ValueError(f"no {part} windows: no {model_cfg.condition} frames from behaviours "
                          f"{list(cfg.behaviours) or 'any'} in the dataset")
     return Objective(ends, lambda rows: make_windows(frames, rows, model_cfg.context, model_cfg.condition,
                                                      cfg.loss), len, row)
+
+
+def validation_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig) -> Validation | None:
+    """The loss on the held-out episodes as the stopping measure, when ``cfg.validation`` > 0."""
+    if cfg.validation <= 0:
+        return None
+    held_out = objective_for(frames, model_cfg, cfg, "validation")
+    return Validation(mean_loss(held_out, cfg.batch_size, pick_device(cfg.device)), cfg.patience)
+
+
+def validation_episodes(frames: Frames, share: float) -> np.ndarray:
+    """Per frame: is its episode held out for validation? ``share`` of each behaviour's episodes (at least one of
+    a behaviour with two or more), the same whatever the training seed (none when ``share`` is 0)."""
+    held = np.zeros(len(frames), dtype=bool)
+    if share <= 0:
+        return held
+    starts = np.flatnonzero(np.r_[True, frames.episode[1:] != frames.episode[:-1]])
+    episode_of_frame = np.cumsum(np.r_[True, frames.episode[1:] != frames.episode[:-1]]) - 1
+    chosen = np.zeros(len(starts), dtype=bool)
+    rng = np.random.default_rng(0)
+    for policy in sorted(set(frames.policy[starts])):
+        mine = np.flatnonzero(frames.policy[starts] == policy)
+        n = max(1, int(round(share * len(mine)))) if len(mine) > 1 else 0  # one at least; never the only one
+        chosen[rng.choice(mine, size=n, replace=False)] = True
+    return chosen[episode_of_frame]
 
 
 def pick_device(name: str) -> torch.device:
@@ -66,19 +101,21 @@ def pick_device(name: str) -> torch.device:
 
 def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bool = True,
              desc: str = "train", on_epoch=None, network: type = DecisionTransformer,
-             state: FitState | None = None, stop_after: int | None = None):
+             state: FitState | None = None, stop_after: int | None = None,
+             validation: Validation | None = None):
     """Train from scratch (or on from ``state``); returns the model (in eval mode) and the curve (mean loss every
     ``log_every``), or a :class:`~hnsdt.models.fit.FitState` when ``stop_after`` epochs come before the end
     (:func:`hnsdt.models.fit.fit`). ``on_epoch(epoch, step, model)``, if given, is called after each complete
     epoch and must not change the model or draw random numbers (budget studies copy it: the model after e
     epochs of a longer run is the model of an e-epoch run, as nothing here depends on the total).
     ``network``: the model class (a :class:`DecisionTransformer` or a subclass of it, e.g.
-    :class:`hnsdt.models.view.ViewDecisionTransformer`)."""
+    :class:`hnsdt.models.view.ViewDecisionTransformer`). With ``cfg.validation`` > 0 it stops at the plateau of
+    the loss on the held-out episodes (``validation``, made here unless given, records it)."""
     objective = objective_for(frames, model_cfg, cfg)
     return fit(network, model_cfg, objective, epochs=cfg.epochs, max_steps=cfg.max_steps,
                batch_size=cfg.batch_size, lr=cfg.lr, seed=cfg.seed, device=pick_device(cfg.device),
                log_every=cfg.log_every, progress=progress, desc=desc, state=state, stop_after=stop_after,
-               on_epoch=on_epoch)
+               on_epoch=on_epoch, validation=validation or validation_for(frames, model_cfg, cfg))
 
 
 def train_decision_transformer(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bool = True,
@@ -86,8 +123,9 @@ def train_decision_transformer(frames: Frames, model_cfg: DTConfig, cfg: TrainCo
                                state: FitState | None = None, stop_after: int | None = None):
     """The registry's trainer (:mod:`hnsdt.methods`): :func:`train_dt` and the data it used, or the
     :class:`~hnsdt.models.fit.FitState` of a run stopped after ``stop_after`` epochs."""
+    validation = validation_for(frames, model_cfg, cfg)
     out = train_dt(frames, model_cfg, cfg, progress=progress, desc=desc, network=network, state=state,
-                   stop_after=stop_after)
+                   stop_after=stop_after, validation=validation)
     if isinstance(out, FitState):
         return out
     model, curve = out
@@ -97,4 +135,9 @@ def train_decision_transformer(frames: Frames, model_cfg: DTConfig, cfg: TrainCo
     per_epoch = len(objective.examples) if objective.sizes is None else int(objective.sizes.sum())
     usage = {"dataset_frames": int(used.sum()), SEEN[model_cfg.formulation]: seen,
              "gradient_steps": curve[-1]["step"], "epochs": round(seen / per_epoch, 3)}
+    if validation is not None:  # the budget the evidence chose
+        used_frames = used & ~validation_episodes(frames, cfg.validation)
+        usage |= {"dataset_frames": int(used_frames.sum()), "validation_frames": int((used & ~used_frames).sum()),
+                  "best_epoch": validation.best_epoch, "stopped_early": validation.stopped_early,
+                  "validation_loss": validation.history}
     return model, curve, usage
