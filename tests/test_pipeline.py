@@ -99,7 +99,7 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
         assert (repo_copy / "metrics" / name).read_bytes() == (repo_copy / "results" / name).read_bytes()
     usage = pd.read_csv(repo_copy / "results/training_usage.csv")
     assert set(usage[usage.training == "online"].env_steps) == {400}
-    assert (usage[usage.training == "dataset"].dataset_frames > 0).all()
+    assert (usage[usage.training == "dataset"].dataset_frames > 0).all() and "epoch_kept" in usage.columns
     recorded = table[table.rrd != ""]
     assert len(recorded) == len(METHODS) * 1 * 2 and all((repo_copy / p).is_file() for p in recorded.mcap)
     report = (repo_copy / "report/report.md").read_text()

@@ -75,7 +75,8 @@ def training_usage(models_root: str | Path, env: str, method: str, seed: int) ->
     usage = meta.get("usage", {})
     return {"method": method, "env": env, "seed": seed, "training": lookup_method(method).training,
             "env_steps": usage.get("env_steps"), "dataset_frames": usage.get("dataset_frames"),
-            "epochs": usage.get("epochs"), "gradient_steps": usage.get("gradient_steps")}
+            "epochs": usage.get("epochs"), "gradient_steps": usage.get("gradient_steps"),
+            "epoch_kept": usage.get("best_epoch")}  # trained to a validation plateau: the epoch whose weights it kept
 
 
 def cell_seed(cell: Cell, fail_index: int) -> int:
@@ -339,8 +340,9 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
         pd.DataFrame(counts, columns=["env", "operator", "segments"]).to_csv(tmp / "training_segments.csv",
                                                                            index=False)
         pd.DataFrame(usage, columns=["method", "env", "seed", "training", "env_steps", "dataset_frames", "epochs",
-                                     "gradient_steps"]).astype({"env_steps": "Int64", "dataset_frames": "Int64",
-                                                                "epochs": "float64", "gradient_steps": "Int64"}).to_csv(
+                                     "gradient_steps", "epoch_kept"]).astype(
+            {"env_steps": "Int64", "dataset_frames": "Int64", "epochs": "float64", "gradient_steps": "Int64",
+             "epoch_kept": "Int64"}).to_csv(
             tmp / "training_usage.csv", index=False)
         (tmp / "model_parameters.json").write_text(json.dumps(params_count, indent=2, sort_keys=True) + "\n")
         summ = add_optimum(summary(table), envs)

@@ -454,25 +454,27 @@ def paper_arm_lines(summ: pd.DataFrame, results: Path) -> list[str]:
 
 def usage_lines(results: Path) -> list[str]:
     """What each learned method trained on (mean over seeds): env steps (online) or dataset frames, the passes
-    over its training data (epochs) and gradient steps (offline)."""
+    over its training data (epochs), gradient steps and, stopped by a validation measure, the epoch kept
+    (offline)."""
     path = results / "training_usage.csv"
     if not path.is_file():
         return []
     u = pd.read_csv(path)
     if u.empty:
         return []
-    if "epochs" not in u:
-        u["epochs"] = float("nan")
-    lines = ["| env | method | trains on | environment steps | dataset frames | epochs | gradient steps |",
-             "|---|---|---|---|---|---|---|"]
+    for column in ("epochs", "epoch_kept"):
+        if column not in u:
+            u[column] = float("nan")
+    lines = ["| env | method | trains on | environment steps | dataset frames | epochs | gradient steps | "
+             "epoch kept |", "|---|---|---|---|---|---|---|---|"]
     order = {m: i for i, m in enumerate(METHODS)}
     g = u.groupby(["env", "method", "training"], as_index=False)[["env_steps", "dataset_frames", "epochs",
-                                                                  "gradient_steps"]].mean()
+                                                                  "gradient_steps", "epoch_kept"]].mean()
     g = g.sort_values(["env", "method"], key=lambda c: c.map(order) if c.name == "method" else c)
     for r in g.itertuples():
         lines.append(f"| {r.env} | {_label(r.method)} | {'the environment' if r.training == 'online' else 'the dataset'}"
                      f" | {_fmt(r.env_steps, ',.0f')} | {_fmt(r.dataset_frames, ',.0f')} | "
-                     f"{_fmt(r.epochs, '.1f')} | {_fmt(r.gradient_steps, ',.0f')} |")
+                     f"{_fmt(r.epochs, '.1f')} | {_fmt(r.gradient_steps, ',.0f')} | {_fmt(r.epoch_kept, '.1f')} |")
     return lines
 
 
