@@ -69,6 +69,8 @@ class WindowContext:
     """The window formulation's decisions: the last h steps of each copy (:class:`History`), the whole window
     through the model at every decision; returns-to-go kept per step of the window."""
 
+    every_step = False  # a copy's steps without an operator need no decision
+
     def __init__(self, model: DecisionTransformer, states: np.ndarray):
         self.model, h = model, model.cfg.context
         self.history = History(states, h)
@@ -94,6 +96,8 @@ class CachedContext:
     """The episode formulation's decisions: one new token per copy and step through the model, attending to
     its key/value cache of the last h − 1 steps (:meth:`DecisionTransformer.step`). Every live copy's step goes
     through the model (the cache must hold each step), whether its action is used or not."""
+
+    every_step = True
 
     def __init__(self, model: DecisionTransformer, states: np.ndarray):
         self.model = model
@@ -142,9 +146,7 @@ class HNSDTAgent(HierarchicalAgent):
 
     def low_level(self, obs: np.ndarray, subgoal_ids: np.ndarray, targets: np.ndarray) -> np.ndarray:
         actions = np.full(len(obs), PICK, dtype=np.int64)  # no operator (done or trapped): a harmless no-op
-        # the window formulation decides only where an operator is active; the cache takes every live step
-        every = isinstance(self.context, CachedContext)
-        rows = np.flatnonzero(((subgoal_ids > 0) | every) & self._live)
+        rows = np.flatnonzero(((subgoal_ids > 0) | self.context.every_step) & self._live)
         if len(rows):
             decided = self.context.decide(rows, subgoal_ids, targets)
             use = subgoal_ids[rows] > 0

@@ -78,10 +78,13 @@ class Objective:
                 total = 0
         return [b for b in np.split(order, ends) if len(b)]
 
+    def per_epoch(self) -> int:
+        """What an epoch counts towards batches: its examples, or (``sizes``) their sizes."""
+        return len(self.examples) if self.sizes is None else int(self.sizes.sum())
+
     def steps_per_epoch(self, batch_size: int) -> int:
         """Batches in an epoch (with ``sizes``: the expected count; each epoch's own can differ by a few)."""
-        n = len(self.examples) if self.sizes is None else int(self.sizes.sum())
-        return int(np.ceil(n / batch_size))
+        return int(np.ceil(self.per_epoch() / batch_size))
 
 
 def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_steps: int, batch_size: int,

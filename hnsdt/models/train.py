@@ -79,18 +79,16 @@ def validation_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig) -> Val
 def validation_episodes(frames: Frames, share: float) -> np.ndarray:
     """Per frame: is its episode held out for validation? ``share`` of each behaviour's episodes (at least one of
     a behaviour with two or more), the same whatever the training seed (none when ``share`` is 0)."""
-    held = np.zeros(len(frames), dtype=bool)
     if share <= 0:
-        return held
-    starts = np.flatnonzero(np.r_[True, frames.episode[1:] != frames.episode[:-1]])
-    episode_of_frame = np.cumsum(np.r_[True, frames.episode[1:] != frames.episode[:-1]]) - 1
+        return np.zeros(len(frames), dtype=bool)
+    starts, lengths = episode_spans(frames)
     chosen = np.zeros(len(starts), dtype=bool)
     rng = np.random.default_rng(0)
     for policy in sorted(set(frames.policy[starts])):
         mine = np.flatnonzero(frames.policy[starts] == policy)
         n = max(1, int(round(share * len(mine)))) if len(mine) > 1 else 0  # one at least; never the only one
         chosen[rng.choice(mine, size=n, replace=False)] = True
-    return chosen[episode_of_frame]
+    return np.repeat(chosen, lengths)
 
 
 def pick_device(name: str) -> torch.device:
@@ -130,11 +128,9 @@ def train_decision_transformer(frames: Frames, model_cfg: DTConfig, cfg: TrainCo
         return out
     model, curve = out
     used = np.isin(frames.policy, list(cfg.behaviours)) if cfg.behaviours else np.ones(len(frames), bool)
-    objective = objective_for(frames, model_cfg, cfg)
     seen = curve[-1][SEEN[model_cfg.formulation]]
-    per_epoch = len(objective.examples) if objective.sizes is None else int(objective.sizes.sum())
-    usage = {"dataset_frames": int(used.sum()), SEEN[model_cfg.formulation]: seen,
-             "gradient_steps": curve[-1]["step"], "epochs": round(seen / per_epoch, 3)}
+    usage = {"dataset_frames": int(used.sum()), SEEN[model_cfg.formulation]: seen, "gradient_steps": curve[-1]["step"],
+             "epochs": round(seen / objective_for(frames, model_cfg, cfg).per_epoch(), 3)}
     if validation is not None:  # the budget the evidence chose
         used_frames = used & ~validation_episodes(frames, cfg.validation)
         usage |= {"dataset_frames": int(used_frames.sum()), "validation_frames": int((used & ~used_frames).sum()),
