@@ -3,12 +3,16 @@
 Usage: python benchmarks/offline_budget.py [--env multikeydoor] [--epochs 1 2 4] [--seeds 0 1] [--episodes 100]
                                            [--methods pure_dt hnsdt lstm_hier gru hnsdt_paper pure_dt_paper]
                                            [--fail-probs 0.1 0.3] [--params params.yaml] [--validated]
+                                           [--set train.formulation.hnsdt_paper=episode ...] [--decompose]
 Trains each method on the pipeline's dataset (data/datasets/ENV; run `dvc repro` first) with the knobs of
 params.yaml but the budget: ``--epochs`` passes over its training data, no step cap. A decision transformer
 trains once for max(--epochs) and is copied after each listed epoch (the model after e epochs of a longer run
 is the model of an e-epoch run: no schedule depends on the total); a recurrent one trains once per budget.
 With ``--validated`` each decision transformer trains instead to the plateau of the params' validation measure
-and the epoch it kept is printed. Every model is evaluated on the pipeline's cells at fail_prob 0.1 and 0.3 (--episodes each). Prints success
+and the epoch it kept is printed. ``--set`` overrides a params key (dotted, the value read as YAML) as
+``dvc exp run -S`` would. ``--decompose`` also prints, per kind of sub-goal, where a plan-following method's
+steps go: steps per episode against the minimum for the sub-goals set, first actions right, sub-goals reached
+(as the report's decomposition table). Every model is evaluated on the pipeline's cells at fail_prob 0.1 and 0.3 (--episodes each). Prints success
 and mean steps on success per budget, with gradient steps, the loss and, for plan-following methods, the share
 of sub-goals reached within their allowance. Runs go in parallel on the local
 executor, one thread each, as in the pipeline.
@@ -28,24 +32,24 @@ import numpy as np  # noqa: E402
 
 
 def run(task):
-    method, env, seed, epochs, keep, params_path, episodes, fail_probs, validated = task
+    method, env, seed, epochs, keep, params_path, overrides, episodes, fail_probs, validated = task
     from dataclasses import replace
     from pathlib import Path
 
     from hnsdt.config import env_spec, load_params, method_executor
-    from hnsdt.evaluation.evaluate import Cell, build_agent, run_cell
+    from hnsdt.evaluation.evaluate import Cell, _navigator, build_agent, run_cell, segment_rows
     from hnsdt.methods import DT_METHODS
     from hnsdt.models.train import train_dt
     from hnsdt.training import plan_runs
 
-    params = load_params(params_path)
+    params = load_params(params_path, overrides)
     (task,) = plan_runs(params, env, method, [seed], Path(f"data/datasets/{env}"))
     model_cfg, cfg, frames, facts = task.model_cfg, task.train_cfg, task.data, task.facts
     snaps = {}
     if validated:  # the params' own budget: stopped by its validation measure (train.validation > 0)
         from hnsdt.models.train import train_decision_transformer
 
-        model, curve, usage = train_decision_transformer(frames, model_cfg, cfg, progress=False)
+        model, curve, usage = train_decision_transformer(frames, model_cfg, cfg, progress=False, measure=task.measure)
         snaps[usage.get("best_epoch", cfg.epochs)] = (usage["gradient_steps"], model)
     elif method in DT_METHODS:
         model, curve = train_dt(frames, model_cfg, replace(cfg, epochs=max(epochs), max_steps=0), progress=False,
@@ -69,9 +73,12 @@ def run(task):
             eps = run_cell(Cell(method, env, fp, seed), fi, E.layout, E.max_steps, episodes, agent)
             ok = [x.length for x in eps if x.success]
             segments = [s.achieved for x in eps for s in x.segments]
-            rows.append({"method": method, "seed": seed, "epochs": e, "steps": step, "loss": loss, "fail_prob": fp,
-                         "success": len(ok) / len(eps), "mean_steps": float(np.mean(ok)) if ok else float("nan"),
-                         "subgoals_reached": float(np.mean(segments)) if segments else float("nan")})
+            row = {"method": method, "seed": seed, "epochs": e, "steps": step, "loss": loss, "fail_prob": fp,
+                   "success": len(ok) / len(eps), "mean_steps": float(np.mean(ok)) if ok else float("nan"),
+                   "subgoals_reached": float(np.mean(segments)) if segments else float("nan"),
+                   "episode_steps": float(np.mean([x.length for x in eps]))}
+            seg = segment_rows(Cell(method, env, fp, seed), eps, _navigator(E.layout))
+            rows.append(row | {"segments": [r | {"epochs": e, "n_episodes": len(eps)} for r in seg]})
     return rows
 
 
@@ -88,15 +95,20 @@ def main() -> None:
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--fail-probs", type=float, nargs="+", default=[0.1, 0.3])
     ap.add_argument("--params", default="params.yaml")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a params key (dotted; the value read as YAML), e.g. train.epochs=5")
+    ap.add_argument("--decompose", action="store_true",
+                    help="also print where each plan-following method's steps go, per kind of sub-goal")
     ap.add_argument("--validated", action="store_true",
                     help="decision transformers: train to the plateau of the params' validation measure "
                          "(train.validation > 0; --epochs ignored) and report the epoch it kept")
     args = ap.parse_args()
     t = time.perf_counter()
-    tasks = [(m, args.env, s, args.epochs, set(args.epochs), args.params, args.episodes, args.fail_probs,
-              args.validated)
+    tasks = [(m, args.env, s, args.epochs, set(args.epochs), args.params, tuple(args.set), args.episodes,
+              args.fail_probs, args.validated)
              for m in args.methods for s in args.seeds]
     rows = [r for part in run_tasks(run, tasks, Compute(), desc="budgets") for r in part]
+    segments = pd.DataFrame([seg for r in rows for seg in r.pop("segments")])
     table = pd.DataFrame(rows)
     if args.validated:
         print(table[table.fail_prob == table.fail_prob.min()][["method", "seed", "epochs", "steps"]].to_string(
@@ -108,6 +120,20 @@ def main() -> None:
         subgoals_reached=("subgoals_reached", "mean")).reset_index()
     print(f"\n{args.env}, seeds {args.seeds}, {args.episodes} episodes per cell ({time.perf_counter() - t:.0f} s)")
     print(out.to_string(index=False, float_format=lambda v: f"{v:.3f}"))
+    if args.decompose and not segments.empty:
+        if args.validated:
+            segments["epochs"] = "validated"
+        segments["kind"] = segments.operator.str.extract(r"^(\w+)", expand=False)
+        episodes = segments.groupby(["method", "epochs", "fail_prob", "seed"]).n_episodes.first().groupby(
+            ["method", "epochs", "fail_prob"]).sum()
+        d = segments.groupby(["method", "epochs", "fail_prob", "kind"]).agg(
+            segments=("steps", "size"), steps=("steps", "sum"), minimum=("optimal_steps", "sum"),
+            first_right=("first_action_right", "mean"), right=("right_actions", "sum"),
+            reached=("achieved", "mean")).reset_index()
+        n = d.set_index(["method", "epochs", "fail_prob"]).index.map(episodes)
+        d = d.assign(right=d.right / d.steps, segments=d.segments / n, steps=d.steps / n, minimum=d.minimum / n)
+        print("\nwhere the steps go (per episode; minimum: 1 / (1 - fail_prob) per Move, 1 per pick / open):")
+        print(d.to_string(index=False, float_format=lambda v: f"{v:.3f}"))
 
 
 if __name__ == "__main__":

@@ -29,8 +29,9 @@ __all__ = ["ParamsError", "Params", "load_params", "EnvSpec", "env_spec", "execu
            "baseline_settings", "fill", "compute_settings", "EvaluateSettings", "evaluate_settings"]
 
 
-def load_params(path: str | Path = "params.yaml") -> Params:
-    """The params file, validated whole before any work starts."""
+def load_params(path: str | Path = "params.yaml", overrides=()) -> Params:
+    """The params file, validated whole before any work starts. ``overrides``: ``"dotted.key=value"`` strings (the
+    value read as YAML) applied first, as ``dvc exp run -S`` would (benchmarks' ``--set``)."""
     path = Path(path)
     if not path.is_file():
         raise ParamsError(f"{path}: no such params file")
@@ -42,6 +43,16 @@ def load_params(path: str | Path = "params.yaml") -> Params:
         raise ParamsError(f"{path}: not valid YAML{where}") from None
     if not isinstance(raw, dict):
         raise ParamsError(f"{path}: expected a mapping of sections at the top level")
+    for override in overrides:
+        key, sep, value = override.partition("=")
+        *parents, last = key.split(".")
+        node = raw
+        for part in parents:
+            node = node.get(part) if isinstance(node, dict) else None
+        if not sep or not isinstance(node, dict):
+            raise ParamsError(f"{path}: cannot set {override!r}: expected KEY=VALUE with KEY a dotted path into "
+                              "a mapping of params.yaml")
+        node[last] = yaml.safe_load(value)
     unknown = sorted(set(raw) - set(SECTIONS))
     if unknown:
         raise ParamsError(f"{path}: unknown section(s) {unknown}; params.yaml has {', '.join(SECTIONS)}")
@@ -134,6 +145,7 @@ class TrainSettings:
     loss: dict[str, str]  # per method: the window steps its loss counts
     formulation: dict[str, str]  # per method: its examples, windows or whole episodes (hnsdt.models.dt)
     budget: dict[str, dict]  # per method with a validation: its TrainConfig fields (validation, patience, epochs)
+    measure: dict[str, tuple[str, int]]  # per method with a validation: its measure and (steps) start states
 
     def method_config(self, method: str, seed: int):
         """The training config of one method and seed."""
@@ -156,7 +168,8 @@ def train_settings(params: Params) -> TrainSettings:
         loss={m: train.loss.get(m, LOSS_STEPS[0]) for m in DT_METHODS},
         formulation={m: train.formulation.get(m, FORMULATIONS[0]) for m in DT_METHODS},
         budget={m: {"validation": float(v.share), "patience": v.patience, "epochs": v.max_epochs}
-                for m, v in train.validation.items()})
+                for m, v in train.validation.items()},
+        measure={m: (v.measure, v.starts) for m, v in train.validation.items()})
 
 
 def fill(params: Params, key: str, cls, section: dict, **fixed):

@@ -155,7 +155,10 @@ def network_configs(params: Params, method: str, seed: int):
                               **models[g.family].model_dump())
         except ValueError as e:
             raise params.error(f"models.{g.family}: {e}") from None
-        return cfg, _budget(params, method, ts.method_config(method, seed))
+        train_cfg = ts.method_config(method, seed)
+        if ts.measure.get(method, ("loss",))[0] != "loss":  # acting from held-out states needs one fixed map:
+            train_cfg = replace(train_cfg, validation=0.0, epochs=ts.config.epochs)  # here, train.epochs
+        return cfg, _budget(params, method, train_cfg)
     bs = baseline_settings(params, method, env, seed)
     return view_cls(**asdict(bs.model), view_radius=g.view_radius), _budget(params, method, bs.train)
 

@@ -72,11 +72,16 @@ METHODS = {m.name: m for m in (
     Method("hnsdt", "HNSDT (ours)", "neuro-symbolic", **_DT, condition="subgoal"),
     Method("pure_dt_paper", "Pure DT (paper)", "pure transformer", **_DT, condition="none", arm="paper"),
     Method("hnsdt_paper", "HNSDT (paper: Move + BFS)", "neuro-symbolic", **_DT, condition="subgoal", arm="paper"),
+    Method("symbolic_paper", "Move + BFS + one-cell controllers", "symbolic", "none", "",
+           "hnsdt.agents.symbolic:make_agent", arm="paper"),
 )}
 
 PROPOSED = "hnsdt"  # the paper's method: the theorems' subject and the report's reference line
 REFERENCE = "symbolic"  # needs no training: the unseen-layout experiment runs it on every split as the reference
 PAPER_ARM = {"hnsdt": "hnsdt_paper", "pure_dt": "pure_dt_paper"}  # each of our transformers -> the paper's build
+# Each plan-following DT -> the hand-written controllers under the same planner: the steps a perfect executor of
+# those sub-goals would take (the report's decomposition of the paper's HNSDT's steps)
+CONTROLLER_FLOOR = {"hnsdt": "symbolic", "hnsdt_paper": "symbolic_paper"}
 DT_METHODS = tuple(m.name for m in METHODS.values() if m.stage == "train")  # configured under `train`
 OFFLINE_BASELINES = tuple(m.name for m in METHODS.values() if m.stage == "train_offline")  # `baselines.offline`
 ONLINE_BASELINES = tuple(m.name for m in METHODS.values() if m.stage == "train_online")  # `baselines.online`

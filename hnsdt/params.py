@@ -90,8 +90,12 @@ class ValidationParams(Section):
     """Training that stops on evidence (hnsdt.models.fit.Validation)."""
 
     share: float = Field(gt=0, lt=1, description="share of each behaviour's episodes held out")
-    patience: PositiveInt = Field(2, description="epochs without a lower held-out loss before stopping")
+    patience: PositiveInt = Field(2, description="epochs without a better measure before stopping")
     max_epochs: PositiveInt = Field(description="the cap")
+    measure: Literal["loss", "steps"] = Field(
+        "loss", description="loss: the loss on the held-out episodes; steps: mean steps to the exit from start "
+        "states of the held-out episodes (fail_prob 0, the method's own agent; a failure counts the step limit)")
+    starts: PositiveInt = Field(64, description="steps: how many held-out states to start from")
 
 
 class TrainParams(Section):

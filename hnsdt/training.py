@@ -33,6 +33,53 @@ class TrainTask:
     progress: bool = False  # a progress bar (when it runs in the stage's process)
     split: bool = False  # stop half-way and hand back the state (seeds that share workers)
     state: Any = None  # where a split run continues from
+    measure: Any = None  # the validation measure when not the held-out loss (:class:`StepsToExit`)
+
+
+@dataclass(frozen=True)
+class StepsToExit:
+    """A validation measure by acting (``train.validation.<method>.measure: steps``): the mean episode length of
+    the method's own agent from start states drawn from the held-out episodes, on the method's map at fail_prob
+    0, a failure counting the step limit. Lower is better; it reads the success and the steps the evaluation
+    reports, on states no training episode contains. Deterministic: greedy agents, no failures."""
+
+    method: str
+    layout: Any
+    max_steps: int
+    executor: Any  # the method's ExecutorConfig
+    starts: np.ndarray  # (n, d) environment states
+    facts: dict  # the checkpoint's facts the agent reads (the pure DT's target return)
+    name: str = "steps"
+
+    @classmethod
+    def from_held_out(cls, frames, held_out: np.ndarray, n: int, method: str, env: EnvSpec, executor,
+                      facts: dict) -> "StepsToExit":
+        """``n`` distinct states of the held-out frames (fixed draw) from which the planner reaches the exit."""
+        from hnsdt.symbolic import NoPlanError, SymbolicState, plan
+
+        states = np.unique(frames.states[held_out], axis=0)
+        solvable = []
+        for s in states:
+            try:
+                plan(env.layout, SymbolicState.from_observation(env.layout, s), executor.plan_mode, executor.operators)
+                solvable.append(s)
+            except NoPlanError:
+                pass
+        if not solvable:
+            raise ValueError(f"{method} on {env.name}: no held-out state from which the exit can be reached; "
+                             "raise train.validation.<method>.share")
+        solvable = np.array(solvable)
+        pick = np.random.default_rng(0).choice(len(solvable), size=min(n, len(solvable)), replace=False)
+        return cls(method, env.layout, env.max_steps, executor, solvable[np.sort(pick)], facts)
+
+    def __call__(self, model) -> float:
+        from hnsdt.agents.rollout import rollout
+        from hnsdt.envs.vector import KeyDoorVectorEnv
+
+        agent = resolve(METHODS[self.method].agent)(model, self.facts, self.layout, self.executor)
+        env = KeyDoorVectorEnv(len(self.starts), self.layout, 0.0, self.max_steps)
+        episodes = rollout(env, agent, seed=0, start_states=self.starts)
+        return float(np.mean([e.length if e.success else self.max_steps for e in episodes]))
 
 
 def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: Path) -> list[TrainTask]:
@@ -54,7 +101,18 @@ def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: 
             _check_operator_coverage(frames, params, env_spec(params, env), method, ts.behaviours[method])
         starts = np.unique(frames.episode_start)
         facts = {"dataset": str(dataset), "target_return": float(frames.returns_to_go[starts].max())}  # pure DT's
-        return [TrainTask(method, seed, model_cfg, ts.method_config(method, seed), frames, facts) for seed in seeds]
+        measure = None
+        kind, n_starts = ts.measure.get(method, ("loss", 0))
+        if kind == "steps":
+            from hnsdt.models.train import validation_episodes
+
+            cfg = ts.method_config(method, seed=0)
+            used = np.isin(frames.policy, list(cfg.behaviours)) if cfg.behaviours else np.ones(len(frames), bool)
+            held_out = validation_episodes(frames, cfg.validation) & used
+            measure = StepsToExit.from_held_out(frames, held_out, n_starts, method, env_spec(params, env),
+                                                method_executor(params, method), facts)
+        return [TrainTask(method, seed, model_cfg, ts.method_config(method, seed), frames, facts, measure=measure)
+                for seed in seeds]
     kind = "offline" if training == "dataset" else "online"  # a baseline: knobs under `baselines.<method>`
     listed = getattr(params.baselines, kind)
     if method not in listed:
@@ -104,9 +162,10 @@ def train_run(task: TrainTask):
     half = (train_cfg.env_steps if online else train_cfg.epochs) // 2
     trainer = resolve(METHODS[method].trainer)
     args = task.data if online else (task.data,)  # online: (layout(s), max_steps)
+    extra = {"measure": task.measure} if task.measure is not None else {}  # (decision transformers only)
     out = trainer(*args, model_cfg, train_cfg, progress=task.progress, desc=f"{method} seed {seed}",
                   network=network_for(method, model_cfg), state=task.state,
-                  stop_after=(half or None) if task.split else None)
+                  stop_after=(half or None) if task.split else None, **extra)
     if not isinstance(out, tuple):  # paused half-way
         return Continue(replace(task, split=False, state=out))
     model, curve, usage = out

@@ -37,6 +37,7 @@ def test_executor_replans_on_overrun(keydoor):
         ex.observe(np.array([0, 0, 0, 0]))
     assert ex.replans == 1 and "overran GoTo(key a)" in ex.replan_reasons[0]
     assert ex.operator.name == "GoTo(key a)" and not ex.segments[0].achieved
+    assert ex.segments[0].outcome == "overran" and ex.replan_counts == {"overran": 1, "broken": 0, "exhausted": 0}
 
 
 def test_executor_replans_when_preconditions_break(keydoor):
@@ -46,6 +47,8 @@ def test_executor_replans_when_preconditions_break(keydoor):
     ex.observe(np.array([3, 0, 0, 0]))  # walked off the key instead of picking it: At(key) no longer holds
     assert ex.replans == 1 and "preconditions broken at PickKey(a)" in ex.replan_reasons[0]
     assert ex.operator.name == "GoTo(key a)"
+    assert [s.outcome for s in ex.segments] == ["achieved", "broken", ""]  # the new GoTo is still open
+    assert ex.replan_counts["broken"] == 1
 
 
 def test_executor_is_stuck_when_trapped(keydoor):

@@ -3,6 +3,8 @@ exploration labelled in hindsight by those operators, and the unconditioned pure
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import torch
@@ -68,6 +70,28 @@ def test_symbolic_controllers_execute_move_plans_optimally(name):
     assert all(ep.success and ep.length == optimal for ep in episodes)
 
 
+@pytest.mark.parametrize("operators", ["move", "goto"])
+def test_the_decomposition_judges_each_action(keydoor, operators):
+    """The controllers' every action is right (first ones included) and every segment is reached in its
+    minimum; an action swapped for a wrong one is counted wrong at that step and nowhere else."""
+    from hnsdt.evaluation.evaluate import Cell, _navigator, right_actions, segment_rows
+
+    config = MOVE if operators == "move" else ExecutorConfig()
+    (ep,) = rollout(KeyDoorVectorEnv(1, keydoor, 0.0, 100), SymbolicAgent(keydoor, config), seed=0)
+    nav = _navigator(keydoor)
+    assert right_actions(ep, nav).all()
+    rows = segment_rows(Cell("symbolic", "keydoor", 0.0, 0), [ep], nav)
+    assert all(r["first_action_right"] and r["right_actions"] == r["steps"] == r["optimal_steps"]
+               and r["outcome"] == "achieved" for r in rows)
+    assert {r["operator"].split("(")[0] for r in rows} >= {"PickKey", "OpenDoor", "Move" if operators == "move"
+                                                             else "GoTo"}
+    for t in (0, 4, ep.length - 1):  # a move, the pick of the key (step 4 from the start), the last move
+        wrong = ep.actions.copy()
+        wrong[t] = (wrong[t] + 1) % 5
+        bad = right_actions(replace(ep, actions=wrong), nav)
+        assert not bad[t] and bad[np.arange(ep.length) != t].all()
+
+
 def test_the_unconditioned_dt_reads_states_and_actions_only():
     cfg = DTConfig("none", n_flags=2, grid_h=5, grid_w=5, context=4, n_layers=1, n_heads=2, d_model=16)
     model = DecisionTransformer(cfg)
@@ -92,6 +116,67 @@ def test_the_last_step_loss_counts_each_frame_once():
     assert last.sum() == 6 and last[:, -1].all()
     with pytest.raises(ValueError, match="loss must be one of"):
         make_windows(frames, ends, 4, "subgoal", loss="first")
+
+
+def _random_walk_frames(layout, n: int, max_steps: int = 60):
+    """Frames of ``n`` random walks from random cells, labelled in hindsight by Move operators."""
+    starts = random_start_states(layout, n, np.random.default_rng(1))
+    cfg = CollectConfig("hnsdt/KeyDoor-v0", layout, max_steps, [0.0], [Behaviour("random", n, "random")])
+    episodes = [_episode_record(cfg, cfg.behaviours[0], 0.0, 0, i, ep) for i, ep in
+                enumerate(rollout(KeyDoorVectorEnv(n, layout, 0.0, max_steps), RandomAgent(1), 1, starts))]
+    lengths = [len(e["actions"]) for e in episodes]
+    frames = frames_from_arrays(
+        np.concatenate([e["states"][:-1] for e in episodes]), np.concatenate([e["actions"] for e in episodes]),
+        np.concatenate([e["rewards"] for e in episodes]), np.concatenate([e["move_subgoal_ids"] for e in episodes]),
+        np.concatenate([e["move_subgoal_targets"] for e in episodes]), np.repeat(np.arange(n), lengths),
+        np.concatenate([np.arange(k) for k in lengths]), ["random"] * sum(lengths))
+    next_states = np.concatenate([e["states"][1:] for e in episodes])
+    return frames, next_states
+
+
+def test_the_achieving_step_loss_counts_only_the_actions_that_achieved_their_subgoal(keydoor):
+    """``loss: achieving`` (a named deviation, docs/paper-arm.md): a hindsight segment's last frame is the one
+    whose transition gained the operator's effect; every formulation supervises exactly those frames."""
+    from hnsdt.data.segmentation import achieved_operator
+    from hnsdt.models.windows import achieving_frames, make_episodes, window_ends
+
+    frames, after = _random_walk_frames(keydoor, 12)
+    gained = np.array([achieved_operator(keydoor, SymbolicState.from_observation(keydoor, s),
+                                         SymbolicState.from_observation(keydoor, t), "move") is not None
+                       for s, t in zip(frames.states, after)])
+    achieving = achieving_frames(frames)
+    assert np.array_equal(achieving, gained) and 0 < achieving.sum() < (frames.subgoals != 0).sum()
+    ends = window_ends(frames, "subgoal", loss="achieving")
+    assert np.array_equal(ends, np.flatnonzero(gained))
+    assert make_windows(frames, ends, 4, "subgoal", loss="achieving")["loss_mask"].sum() == len(ends)
+    starts = np.flatnonzero(np.r_[True, frames.episode[1:] != frames.episode[:-1]])
+    lengths = np.diff(np.r_[starts, len(frames)])
+    batch = make_episodes(frames, starts, lengths, "subgoal", loss="achieving")
+    assert batch["loss_mask"].sum() == gained.sum()
+    with pytest.raises(ValueError, match="needs sub-goal labels"):
+        window_ends(frames, "return", loss="achieving")
+
+
+def test_the_steps_measure_acts_from_held_out_states_and_keys_the_record(keydoor):
+    """``measure: steps``: distinct held-out states the planner can solve, the method's own agent on them at
+    fail_prob 0, the same value on every call; training records it as ``validation_steps``."""
+    from hnsdt.config import EnvSpec
+    from hnsdt.models.train import train_decision_transformer, validation_episodes
+    from hnsdt.training import StepsToExit
+
+    frames, _ = _random_walk_frames(keydoor, 12)
+    held = validation_episodes(frames, 0.25)
+    env = EnvSpec("keydoor", "hnsdt/KeyDoor-v0", keydoor, 30)
+    measure = StepsToExit.from_held_out(frames, held, 16, "hnsdt_paper", env, MOVE, {})
+    assert len(measure.starts) == 16 and len(np.unique(measure.starts, axis=0)) == 16
+    assert all((frames.states[held] == s).all(1).any() for s in measure.starts)
+    cfg = DTConfig("subgoal", keydoor.n_flags, *keydoor.shape, context=4, n_layers=1, d_model=32, max_timestep=100,
+                   formulation="episode")
+    tc = TrainConfig(epochs=3, batch_size=64, seed=0, validation=0.25, patience=5, device="cpu")
+    model, _, usage = train_decision_transformer(frames, cfg, tc, progress=False, measure=measure)
+    values = [h["value"] for h in usage["validation_steps"]]
+    assert len(values) == 3 and all(0 < v <= 30 for v in values) and "validation_loss" not in usage
+    assert measure(model) == measure(model) == values[usage["best_epoch"] - 1]
 
 
 @pytest.mark.learning

@@ -28,6 +28,12 @@ class Segment:
     start: int
     end: int | None = None
     achieved: bool = False
+    outcome: str = ""  # "achieved", a replan's reason ("overran", "broken"), or "ended" (the episode ended first)
+
+
+# Why the executor replans: the operator took more than its allowance; the rest of the plan's preconditions no
+# longer hold (a failed or wrong step broke them); the plan ran out before the goal.
+REPLAN_REASONS = {"overran": "overran {op}", "broken": "preconditions broken at {op}", "exhausted": "plan exhausted"}
 
 
 @dataclass
@@ -55,7 +61,8 @@ class PlanExecutor:
     stuck: bool = False  # no plan exists any more (e.g. trapped in a closed door without its key)
     initial_plan: list[str] = field(default_factory=list)
     segments: list[Segment] = field(default_factory=list)
-    replan_reasons: list[str] = field(default_factory=list)
+    replan_reasons: list[str] = field(default_factory=list)  # "t:reason", in the words of REPLAN_REASONS
+    replan_counts: dict[str, int] = field(default_factory=lambda: dict.fromkeys(REPLAN_REASONS, 0))
 
     @property
     def operator(self) -> Operator | None:
@@ -81,16 +88,19 @@ class PlanExecutor:
         if op is not None:
             self.segments.append(Segment(op.name, psi(op).id, self.t))
 
-    def _close_segment(self, achieved: bool) -> None:
+    def _close_segment(self, outcome: str) -> None:
         if self.segments and self.segments[-1].end is None:
             self.segments[-1].end = self.t
-            self.segments[-1].achieved = achieved
+            self.segments[-1].achieved = outcome == "achieved"
+            self.segments[-1].outcome = outcome
 
     def _replan(self, state: SymbolicState, reason: str | None) -> None:
         if reason is not None:
-            self._close_segment(achieved=False)
+            self._close_segment(reason)
             self.replans += 1
-            self.replan_reasons.append(f"{self.t}:{reason}")
+            self.replan_counts[reason] += 1
+            op = self.operator
+            self.replan_reasons.append(f"{self.t}:" + REPLAN_REASONS[reason].format(op=op.name if op else ""))
         try:
             self.plan = plan(self.layout, state, self.config.plan_mode, self.config.operators)
             self.stuck = False
@@ -108,7 +118,7 @@ class PlanExecutor:
         preds = state.predicates(self.layout)
         advanced = False
         while self.operator is not None and self.operator.achieved(preds):
-            self._close_segment(achieved=True)
+            self._close_segment("achieved")
             self.index += 1
             advanced = True
             self._open_segment()
@@ -116,12 +126,12 @@ class PlanExecutor:
             return None
         op = self.operator
         if op is None:
-            self._replan(state, "plan exhausted")
+            self._replan(state, "exhausted")
         elif not advanced and self.t - self.op_start > self.allowance(op):
-            self._replan(state, f"overran {op.name}")
+            self._replan(state, "overran")
         elif not _still_valid(self.layout, state, tuple(self.plan[self.index:]), self.config.operators):
-            self._replan(state, f"preconditions broken at {op.name}")
+            self._replan(state, "broken")
         return self.operator
 
     def finish(self) -> None:
-        self._close_segment(achieved=False)
+        self._close_segment("ended")

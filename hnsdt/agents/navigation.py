@@ -69,8 +69,29 @@ class Navigator:
         """First moves for a batch; NO_MOVE where the agent is on the target or cannot reach it."""
         return self.first_move[target_idx, masks, cells[:, 0], cells[:, 1]]
 
+    def on_shortest_path(self, target_idx: np.ndarray, masks: np.ndarray, cells: np.ndarray,
+                         actions: np.ndarray) -> np.ndarray:
+        """Whether each move brings its agent one step closer to the target (any shortest path's first move,
+        not only the controller's tie-break); pick/open is never a move closer."""
+        h, w = self.layout.shape
+        step = np.array(MOVES + ((0, 0),))[actions]  # pick: (0, 0), never closer
+        nxt = np.clip(cells + step, 0, [h - 1, w - 1])
+        here = self.distance[target_idx, masks, cells[:, 0], cells[:, 1]]
+        there = self.distance[target_idx, masks, nxt[:, 0], nxt[:, 1]]
+        return (actions != PICK) & (here > 0) & (there == here - 1)
+
     def controller_actions(self, target_idx: np.ndarray, masks: np.ndarray, cells: np.ndarray) -> np.ndarray:
         """The hand-written controller: walk the shortest path to the target, then pick/open on it.
         Recomputed from the current cell every step, so a failed move is simply retried."""
         moves = self.moves(target_idx, masks, cells)
         return np.where(moves >= 0, moves, PICK)
+
+
+def step_towards(cells: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """The one-cell controller of the paper's ``Move`` operators: the move onto a neighbouring target cell, and
+    pick/open when the target is the agent's own cell."""
+    delta = targets - cells
+    actions = np.full(len(cells), PICK, dtype=np.int64)
+    for a, (dr, dc) in enumerate(MOVES):
+        actions[(delta[:, 0] == dr) & (delta[:, 1] == dc)] = a
+    return actions

@@ -28,6 +28,7 @@ class Episode:
     plan: list[str] = field(default_factory=list)
     segments: list = field(default_factory=list)
     replans: int = 0
+    replan_counts: dict = field(default_factory=dict)  # replans per reason (hnsdt.agents.executor.REPLAN_REASONS)
 
     @property
     def length(self) -> int:
@@ -116,6 +117,6 @@ def rollout(env: KeyDoorVectorEnv, agent: Agent, seed: int, start_states: np.nda
             subgoal_ids=sub_ids[:T, i].copy(), subgoal_targets=sub_targets[:T, i].copy(),
             success=bool(env.terminated[i]),
             plan=list(ex.initial_plan) if ex else [], segments=list(ex.segments) if ex else [],
-            replans=ex.replans if ex else 0,
+            replans=ex.replans if ex else 0, replan_counts=dict(ex.replan_counts) if ex else {},
         ))
     return episodes

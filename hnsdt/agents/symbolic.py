@@ -11,9 +11,9 @@ import numpy as np
 
 from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.agents.hierarchical import HierarchicalAgent
-from hnsdt.agents.navigation import Navigator
+from hnsdt.agents.navigation import Navigator, step_towards
 from hnsdt.envs.keydoor import PICK
-from hnsdt.envs.layout import MOVES, Layout
+from hnsdt.envs.layout import Layout
 
 
 class SymbolicAgent(HierarchicalAgent):
@@ -27,10 +27,7 @@ class SymbolicAgent(HierarchicalAgent):
         masks = obs[:, self._door_cols] @ self._door_bits
         has_goal = subgoal_ids > 0
         if self.config.operators == "move":  # the target is a neighbour (Move) or the agent's own cell
-            delta = targets - obs[:, :2]
-            actions = np.full(len(obs), PICK, dtype=np.int64)
-            for a, (dr, dc) in enumerate(MOVES):
-                actions[(delta[:, 0] == dr) & (delta[:, 1] == dc)] = a
+            actions = step_towards(obs[:, :2], targets)
         else:
             target_idx = self.navigator.target_grid[targets[:, 0], targets[:, 1]]  # (-1, -1) rows masked below
             actions = self.navigator.controller_actions(target_idx, masks, obs[:, :2])

@@ -19,8 +19,10 @@ from typing import Any, Callable
 import numpy as np
 import pandas as pd
 
-from hnsdt.agents.executor import ExecutorConfig
+from hnsdt.agents.executor import REPLAN_REASONS, ExecutorConfig
+from hnsdt.agents.navigation import step_towards
 from hnsdt.agents.rollout import Agent, Episode, rollout
+from hnsdt.envs.keydoor import PICK
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv
 from hnsdt.methods import ARMS, resolve
@@ -99,6 +101,7 @@ def episode_rows(cell: Cell, episodes: list[Episode], layout: Layout, executor: 
         row = {"method": cell.method, "env": cell.env, "fail_prob": cell.fail_prob, "seed": cell.seed,
                "episode": i, "episode_id": cell.episode_id(i), "success": bool(ep.success), "steps": ep.length,
                "reward": round(ep.ret, 6), "replans": ep.replans,
+               **{f"replans_{reason}": ep.replan_counts.get(reason, 0) for reason in REPLAN_REASONS},
                "plan_length": np.nan, "plan_cost": np.nan, "optimal_plan_cost": np.nan}
         if ep.plan:
             s0 = SymbolicState.from_observation(layout, ep.states[0])
@@ -116,13 +119,40 @@ def _navigator(layout: Layout):
     return Navigator(layout)
 
 
+def right_actions(episode: Episode, navigator) -> np.ndarray:
+    """Per step of a plan-following episode: was its action one that achieves the operator being pursued
+    fastest? A Move: the step onto its target cell; a GoTo: a move one closer along some shortest path; pick and
+    open operators: pick/open. Steps with no operator are never right."""
+    lay = navigator.layout
+    T = episode.length
+    right = np.zeros(T, dtype=bool)
+    cells, actions, targets = episode.states[:T, :2], episode.actions, episode.subgoal_targets
+    for seg in episode.segments:
+        end = min(seg.end if seg.end is not None else T, T)
+        if end <= seg.start:
+            continue
+        span = slice(seg.start, end)
+        kind = seg.operator.split("(")[0]
+        if kind == "Move":
+            right[span] = step_towards(cells[span], targets[span]) == actions[span]
+        elif kind == "GoTo":
+            masks = episode.states[span][:, lay.door_flags] @ (1 << np.arange(len(lay.doors)))
+            idx = navigator.target_grid[targets[span, 0], targets[span, 1]]
+            right[span] = navigator.on_shortest_path(idx, masks, cells[span], actions[span])
+        else:
+            right[span] = actions[span] == PICK
+    return right
+
+
 def segment_rows(cell: Cell, episodes: list[Episode], navigator) -> list[dict]:
     """One row per executed sub-goal segment, with the optimal expected steps to achieve its operator from the
     segment's first state: d / (1 − fail_prob) for a shortest path of d moves (d = 1 for a Move operator), 1 for
-    pick/open."""
+    pick/open; whether its first action was right (:func:`right_actions`), how many of its actions were, and how
+    it ended (``outcome``: achieved, overran or broken — the replan's reason —, or ended with the episode)."""
     rows = []
     lay = navigator.layout
     for i, ep in enumerate(episodes):
+        right = right_actions(ep, navigator)
         for seg in ep.segments:
             end = seg.end if seg.end is not None else ep.length
             if end <= seg.start:
@@ -140,7 +170,9 @@ def segment_rows(cell: Cell, episodes: list[Episode], navigator) -> list[dict]:
             rows.append({"method": cell.method, "env": cell.env, "fail_prob": cell.fail_prob, "seed": cell.seed,
                          "episode_id": cell.episode_id(i), "operator": seg.operator, "subgoal_id": seg.subgoal_id,
                          "start": seg.start, "end": end, "steps": end - seg.start, "optimal_steps": optimal,
-                         "achieved": bool(seg.achieved)})
+                         "achieved": bool(seg.achieved), "outcome": seg.outcome,
+                         "first_action_right": bool(right[seg.start]),
+                         "right_actions": int(right[seg.start:end].sum())})
     return rows
 
 

@@ -312,10 +312,11 @@ def seed_lines(view: pd.DataFrame) -> list[str]:
 def arm_table(table: pd.DataFrame, arm: str) -> pd.DataFrame:
     """The rows of one arm's comparison: the shared baselines plus that arm's transformers, which take the
     names of ours (``hnsdt``, ``pure_dt``) so that the paper's claims read the same for both arms."""
+    ours = table.method.map(lambda m: METHODS[m].arm == "ours")  # the paper arm's floor is no claim's subject
     if arm == "ours":
-        return table[~table.method.isin(PAPER_ARM.values())]
+        return table[ours]
     rename = {paper: ours for ours, paper in PAPER_ARM.items()}
-    kept = table[~table.method.isin(PAPER_ARM.keys())]
+    kept = table[(ours & ~table.method.isin(PAPER_ARM.keys())) | table.method.isin(PAPER_ARM.values())]
     return kept.assign(method=kept.method.map(lambda m: rename.get(m, m)))
 
 
@@ -413,7 +414,7 @@ def claim_lines(summ: pd.DataFrame, view: pd.DataFrame | None = None, arm: str =
 
 def paper_arm_lines(summ: pd.DataFrame, results: Path) -> list[str]:
     """Both arms side by side (success, steps of successful episodes and their ratio to the exact optimum, per
-    env × fail_prob), and how often the paper's HNSDT reached each kind of sub-goal its planner set."""
+    env × fail_prob), and where the paper's HNSDT's steps go (:func:`decomposition_lines`)."""
     planners = [name for name, m in METHODS.items() if m.training == "none"]  # the symbolic baseline
     methods = [m for m in (*planners, *[x for pair in PAPER_ARM.items() for x in pair]) if m in set(summ.method)]
     if not set(PAPER_ARM.values()) & set(methods):
@@ -433,22 +434,63 @@ def paper_arm_lines(summ: pd.DataFrame, results: Path) -> list[str]:
         lines.append(f"| {env} | {fp:g} | " + " | ".join(cells) + " |")
     lines += ["", "Each cell: success rate / mean steps of successful episodes (steps relative to the exact "
               "optimum), mean over seeds.", ""]
-    seg_path = results / "segments.csv"
-    if seg_path.is_file():
-        seg = pd.read_csv(seg_path)
-        seg = seg[seg.method == PAPER_ARM[PROPOSED]]
-        if not seg.empty:
-            seg = seg.assign(kind=seg.operator.str.extract(r"^(\w+)", expand=False))
-            t = seg.groupby(["env", "fail_prob", "kind"]).achieved.agg(["mean", "size"]).reset_index()
-            kinds = sorted(set(t.kind), key=lambda k: (k != "Move", k))
-            lines += [f"Sub-goals of {_label(PAPER_ARM[PROPOSED])} reached within their step allowance (share of "
-                      "the planner's operators, all seeds; `results/segments.csv`):", "",
-                      "| env | fail_prob | " + " | ".join(kinds) + " |", "|---|---|" + "---|" * len(kinds)]
-            for (env, fp), g in t.groupby(["env", "fail_prob"], sort=True):
-                by = g.set_index("kind")
-                lines.append(f"| {env} | {fp:g} | " + " | ".join(
-                    f"{by.loc[k, 'mean']:.3f} (n={int(by.loc[k, 'size'])})" if k in by.index else "–"
-                    for k in kinds) + " |")
+    return lines + decomposition_lines(results, PAPER_ARM[PROPOSED])
+
+
+def decomposition_lines(results: Path, method: str) -> list[str]:
+    """Where a plan-following DT's steps go, beside the hand-written controllers under the same planner (the
+    floor a perfect executor of those sub-goals reaches): per kind of sub-goal, the steps spent per episode
+    against the minimum expected for the sub-goals set (``optimal_steps``), the share of first actions that are
+    right and of sub-goals reached within their allowance; then the replans per episode by reason."""
+    from hnsdt.agents.executor import REPLAN_REASONS
+    from hnsdt.methods import CONTROLLER_FLOOR
+
+    seg_path, ep_path = results / "segments.csv", results / "episodes.csv"
+    if not seg_path.is_file() or not ep_path.is_file():
+        return []
+    pair = [method, CONTROLLER_FLOOR[method]]
+    seg = pd.read_csv(seg_path)
+    seg = seg[seg.method.isin(pair)]
+    if method not in set(seg.method) or "first_action_right" not in seg:
+        return []
+    episodes = pd.read_csv(ep_path)
+    episodes = episodes[episodes.method.isin(pair)]
+    n_ep = episodes.groupby(["method", "env", "fail_prob"]).size()
+    seg = seg.assign(kind=seg.operator.str.extract(r"^(\w+)", expand=False))
+    t = seg.groupby(["method", "env", "fail_prob", "kind"]).agg(
+        n=("steps", "size"), steps=("steps", "sum"), optimal=("optimal_steps", "sum"),
+        first=("first_action_right", "mean"), reached=("achieved", "mean"))
+    kinds = sorted(set(seg.kind), key=lambda k: (k not in ("Move", "GoTo"), k))
+    head = ["segments / episode", "steps / episode (minimum)", "first action right", "reached"]
+    lines = [f"Where the steps of {_label(method)} go, beside {_label(pair[1])} (the same planner, "
+             "hand-written one-cell controllers: the floor of this design), per kind of sub-goal; steps per "
+             "episode against the minimum expected for the sub-goals set (1 / (1 − fail_prob) per Move, 1 per "
+             "pick / open), all seeds (`results/segments.csv`):", "",
+             "| env | fail_prob | sub-goal | " + " | ".join(f"{h}: {m}" for m in ("DT", "controllers") for h in head)
+             + " |", "|---|---|---|" + "---|" * 2 * len(head)]
+    for (env, fp), _ in seg.groupby(["env", "fail_prob"], sort=True):
+        for kind in kinds:
+            cells = []
+            for m in pair:
+                key = (m, env, fp, kind)
+                if key not in t.index or (m, env, fp) not in n_ep.index:
+                    cells += ["–"] * len(head)
+                    continue
+                r, n = t.loc[key], n_ep[(m, env, fp)]
+                cells += [f"{r.n / n:.2f}", f"{r.steps / n:.1f} ({r.optimal / n:.1f})", f"{r['first']:.3f}",
+                          f"{r.reached:.3f}"]
+            lines.append(f"| {env} | {fp:g} | {kind} | " + " | ".join(cells) + " |")
+    reasons = [f"replans_{r}" for r in REPLAN_REASONS]
+    if set(reasons) <= set(episodes.columns):
+        per = episodes.groupby(["env", "fail_prob", "method"])[["steps", *reasons]].mean()
+        lines += ["", "Replans per episode by reason (overran: the sub-goal took more than its allowance; broken: "
+                  "a step broke the rest of the plan's preconditions; exhausted: the plan ran out before the exit) "
+                  "and steps per episode (all episodes; a failure counts its steps to the limit):", "",
+                  "| env | fail_prob | method | steps | " + " | ".join(REPLAN_REASONS) + " |",
+                  "|---|---|---|---|" + "---|" * len(reasons)]
+        for (env, fp, m), r in per.iterrows():
+            lines.append(f"| {env} | {fp:g} | {_label(m)} | {r.steps:.1f} | "
+                         + " | ".join(f"{r[c]:.2f}" for c in reasons) + " |")
     return lines
 
 

@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from hnsdt.models.windows import Frames, episode_spans, make_episodes, make_windows, window_ends
+from hnsdt.models.windows import (Frames, achieving_frames, episode_spans, make_episodes, make_windows,
+                                  window_ends)
 from hnsdt.models.fit import FitState, Objective, Validation, fit, mean_loss
 from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint  # noqa: F401  (re-exported)
 from hnsdt.models.dt import DecisionTransformer, DTConfig
@@ -27,7 +28,7 @@ class TrainConfig:
     device: str = "auto"  # "auto" = cuda if available, else cpu
     log_every: int = 10  # one training-curve row per this many steps
     behaviours: tuple[str, ...] = ()  # train on episodes of these collection behaviours (empty = all)
-    loss: str = "window"  # the window steps the loss counts: "window" or "last" (hnsdt.models.windows.make_windows)
+    loss: str = "window"  # the steps the loss counts: "window", "last" or "achieving" (hnsdt.models.windows)
     validation: float = 0.0  # > 0: this share of the episodes (of each behaviour) is held out, its loss measured
     #                          after each epoch; training stops once it has not improved for `patience` epochs
     #                          (`epochs` is then the cap) and keeps the best epoch's weights
@@ -49,17 +50,19 @@ def objective_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, part: s
     if model_cfg.formulation == "episode":
         starts, lengths = episode_spans(frames, cfg.behaviours)
         keep = held[starts]
-        if model_cfg.condition == "subgoal":  # supervised steps: those with a sub-goal
-            count = np.r_[0, np.cumsum(frames.subgoals != 0)]
+        if model_cfg.condition == "subgoal":  # supervised steps: those with a sub-goal (that achieved it)
+            supervised = achieving_frames(frames) if cfg.loss == "achieving" else frames.subgoals != 0
+            count = np.r_[0, np.cumsum(supervised)]
             keep &= count[starts + lengths] - count[starts] > 0
         starts, lengths = starts[keep], lengths[keep]
         if len(starts) == 0:
             raise ValueError(f"no {part} episodes: no {model_cfg.condition} episodes from behaviours "
                              f"{list(cfg.behaviours) or 'any'} in the dataset")
         return Objective(np.arange(len(starts)),
-                         lambda rows: make_episodes(frames, starts[rows], lengths[rows], model_cfg.condition),
+                         lambda rows: make_episodes(frames, starts[rows], lengths[rows], model_cfg.condition,
+                                                    cfg.loss),
                          lambda rows: int(lengths[rows].sum()), row, sizes=lengths)
-    ends = window_ends(frames, model_cfg.condition, cfg.behaviours)
+    ends = window_ends(frames, model_cfg.condition, cfg.behaviours, cfg.loss)
     ends = ends[held[ends]]
     if len(ends) == 0:
         raise ValueError(f"no {part} windows: no {model_cfg.condition} frames from behaviours "
@@ -68,12 +71,15 @@ def objective_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, part: s
                                                      cfg.loss), len, row)
 
 
-def validation_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig) -> Validation | None:
-    """The loss on the held-out episodes as the stopping measure, when ``cfg.validation`` > 0."""
+def validation_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, measure=None) -> Validation | None:
+    """The stopping measure, when ``cfg.validation`` > 0: ``measure(model)`` if given (lower is better; e.g.
+    :class:`hnsdt.training.StepsToExit`), else the loss on the held-out episodes."""
     if cfg.validation <= 0:
         return None
-    held_out = objective_for(frames, model_cfg, cfg, "validation")
-    return Validation(mean_loss(held_out, cfg.batch_size, pick_device(cfg.device)), cfg.patience)
+    if measure is None:
+        held_out = objective_for(frames, model_cfg, cfg, "validation")
+        measure = mean_loss(held_out, cfg.batch_size, pick_device(cfg.device))
+    return Validation(measure, cfg.patience)
 
 
 def validation_episodes(frames: Frames, share: float) -> np.ndarray:
@@ -118,10 +124,11 @@ def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bo
 
 def train_decision_transformer(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bool = True,
                                desc: str = "train", network: type = DecisionTransformer,
-                               state: FitState | None = None, stop_after: int | None = None):
+                               state: FitState | None = None, stop_after: int | None = None, measure=None):
     """The registry's trainer (:mod:`hnsdt.methods`): :func:`train_dt` and the data it used, or the
-    :class:`~hnsdt.models.fit.FitState` of a run stopped after ``stop_after`` epochs."""
-    validation = validation_for(frames, model_cfg, cfg)
+    :class:`~hnsdt.models.fit.FitState` of a run stopped after ``stop_after`` epochs. ``measure``: the
+    validation measure when not the held-out loss (:func:`validation_for`; its ``name`` keys the record)."""
+    validation = validation_for(frames, model_cfg, cfg, measure)
     out = train_dt(frames, model_cfg, cfg, progress=progress, desc=desc, network=network, state=state,
                    stop_after=stop_after, validation=validation)
     if isinstance(out, FitState):
@@ -135,5 +142,5 @@ def train_decision_transformer(frames: Frames, model_cfg: DTConfig, cfg: TrainCo
         used_frames = used & ~validation_episodes(frames, cfg.validation)
         usage |= {"dataset_frames": int(used_frames.sum()), "validation_frames": int((used & ~used_frames).sum()),
                   "best_epoch": validation.best_epoch, "stopped_early": validation.stopped_early,
-                  "validation_loss": validation.history}
+                  f"validation_{getattr(measure, 'name', 'loss')}": validation.history}
     return model, curve, usage

@@ -48,17 +48,37 @@ def frames_from_arrays(states, actions, rewards, subgoals, targets, episode, tim
                   np.asarray(policy if policy is not None else [""] * n, dtype=object))
 
 
-def window_ends(frames: Frames, condition: str, behaviours=()) -> np.ndarray:
-    """Frames that end a training window: every frame with a sub-goal (HNSDT) or every frame (pure DTs), of
-    episodes collected by one of ``behaviours`` (all episodes when empty). Context reaches into any frame."""
+def achieving_frames(frames: Frames) -> np.ndarray:
+    """Per frame: did its action achieve its sub-goal? The last frame of each run of one sub-goal (id and target)
+    within an episode. In a hindsight-labelled random walk the run's earlier frames are the actions that did not
+    (wall bumps, picks on nothing); in a planner's segment, failed attempts of the right action."""
+    g = frames.subgoals
+    nxt = np.r_[1:len(frames), len(frames) - 1]
+    ends = ((frames.episode[nxt] != frames.episode) | (g[nxt] != g) | (frames.targets[nxt] != frames.targets).any(-1)
+            | (np.arange(len(frames)) == len(frames) - 1))
+    return ends & (g != 0)
+
+
+def window_ends(frames: Frames, condition: str, behaviours=(), loss: str = "window") -> np.ndarray:
+    """Frames that end a training window: every frame with a sub-goal (HNSDT; with ``loss="achieving"`` only
+    those that achieved it) or every frame (pure DTs), of episodes collected by one of ``behaviours`` (all
+    episodes when empty). Context reaches into any frame."""
     keep = frames.subgoals != 0 if condition == "subgoal" else np.ones(len(frames), dtype=bool)
+    if loss == "achieving":
+        keep &= _achieving(frames, condition)
     if len(behaviours):
         keep &= np.isin(frames.policy, list(behaviours))
     return np.flatnonzero(keep)
 
 
 FORMULATIONS = ("window", "episode")  # a decision transformer's examples: windows, or whole episodes
-LOSS_STEPS = ("window", "last")
+LOSS_STEPS = ("window", "last", "achieving")
+
+
+def _achieving(frames: Frames, condition: str) -> np.ndarray:
+    if condition != "subgoal":
+        raise ValueError(f"loss 'achieving' needs sub-goal labels; a {condition!r}-conditioned DT has none")
+    return achieving_frames(frames)
 
 
 def make_windows(frames: Frames, ends: np.ndarray, h: int, condition: str, loss: str = "window"
@@ -67,9 +87,11 @@ def make_windows(frames: Frames, ends: np.ndarray, h: int, condition: str, loss:
 
     ``loss`` picks the steps the loss counts: ``window`` = every step of the window that serves its sub-goal
     (every real step for the pure DTs), more signal per window; ``last`` = only the window's last step, so each
-    frame counts once (the paper's objective). With ``window`` a segment's early steps count in several
-    windows and its last step in one: harmless when every action of a segment leads to its sub-goal, biased
-    towards the non-achieving actions of hindsight-labelled random walks (README, "Two arms")."""
+    frame counts once (the paper's objective); ``achieving`` = the last step too, of windows that end where a
+    sub-goal was achieved (:func:`window_ends`; a deviation from the paper, docs/paper-arm.md). With ``window`` a
+    segment's early steps count in several windows and its last step in one: harmless when every action of a
+    segment leads to its sub-goal, biased towards the non-achieving actions of hindsight-labelled random walks
+    (docs/paper-arm.md)."""
     if loss not in LOSS_STEPS:
         raise ValueError(f"loss must be one of {LOSS_STEPS}, got {loss!r}")
     offsets = np.arange(h - 1, -1, -1)
@@ -92,7 +114,7 @@ def make_windows(frames: Frames, ends: np.ndarray, h: int, condition: str, loss:
         if condition == "return":
             batch["returns"] = frames.returns_to_go[idx]
         batch["loss_mask"] = ~pad
-    if loss == "last":
+    if loss in ("last", "achieving"):
         batch["loss_mask"][:, :-1] = False
     return batch
 
@@ -107,10 +129,11 @@ def episode_spans(frames: Frames, behaviours=()) -> tuple[np.ndarray, np.ndarray
     return starts, lengths
 
 
-def make_episodes(frames: Frames, starts: np.ndarray, lengths: np.ndarray, condition: str
+def make_episodes(frames: Frames, starts: np.ndarray, lengths: np.ndarray, condition: str, loss: str = "window"
                   ) -> dict[str, np.ndarray]:
     """Whole episodes, right-padded to the longest, with each step's own conditioning; the loss counts every
-    real step once (HNSDT: every step with a sub-goal)."""
+    real step once (HNSDT: every step with a sub-goal; ``loss="achieving"``: every step that achieved its
+    sub-goal, :func:`achieving_frames`). ``window`` and ``last`` are the same here: each step counts once."""
     steps = np.arange(lengths.max())
     real = steps[None, :] < lengths[:, None]
     idx = np.where(real, starts[:, None] + steps[None, :], starts[:, None])  # pads read the first frame
@@ -120,6 +143,8 @@ def make_episodes(frames: Frames, starts: np.ndarray, lengths: np.ndarray, condi
         batch["subgoal_ids"] = frames.subgoals[idx]
         batch["subgoal_targets"] = frames.targets[idx]
         batch["loss_mask"] = real & (batch["subgoal_ids"] != 0)
+        if loss == "achieving":
+            batch["loss_mask"] &= _achieving(frames, condition)[idx]
     elif condition == "return":
         batch["returns"] = frames.returns_to_go[idx]
     return batch
