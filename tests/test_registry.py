@@ -100,3 +100,16 @@ def test_every_method_trains_and_acts_through_its_registry_entry(tiny, name):
     assert isinstance(agent, Agent)  # the protocol every evaluated policy follows
     episodes = run_cell(Cell(name, "keydoor", 0.1, 0), 0, env.layout, 20, 3, agent)
     assert len(episodes) == 3 and all(1 <= ep.length <= 20 for ep in episodes)
+
+
+def test_the_train_stage_declares_every_training_knob_it_reads():
+    """A `train` knob the decision transformers' training reads but the `train` stage does not list in its params
+    would not rerun training when changed (train.formulation and train.validation once were missing)."""
+    import yaml
+
+    from hnsdt.params import TrainParams
+
+    stage = yaml.safe_load((Path(__file__).parents[1] / "dvc.yaml").read_text())["stages"]["train"]
+    declared = set(stage["params"])
+    read = set(TrainParams.model_fields) - {"envs", "methods"}  # these two expand the stage's matrix instead
+    assert "train" in declared or not {f"train.{knob}" for knob in read} - declared

@@ -468,8 +468,8 @@ def decomposition_lines(results: Path, method: str) -> list[str]:
              "pick / open), all seeds (`results/segments.csv`):", "",
              "| env | fail_prob | sub-goal | " + " | ".join(f"{h}: {m}" for m in ("DT", "controllers") for h in head)
              + " |", "|---|---|---|" + "---|" * 2 * len(head)]
-    for (env, fp), _ in seg.groupby(["env", "fail_prob"], sort=True):
-        for kind in kinds:
+    for (env, fp), here in seg.groupby(["env", "fail_prob"], sort=True):
+        for kind in [k for k in kinds if k in set(here.kind)]:  # (an env without items has no PickItem)
             cells = []
             for m in pair:
                 key = (m, env, fp, kind)
