@@ -193,8 +193,20 @@ def train_all(runs: list[TrainTask], env: str, out: Path, curves: Path, compute,
         for run, (model, facts, curve) in zip(runs, results):
             save_checkpoint(model, staging / f"seed{run.seed}", {"env": env, "method": method, **facts})
             pd.DataFrame(curve).to_csv(curve_staging / f"seed{run.seed}.csv", index=False)
-            usage = ", ".join(f"{k} {v}" for k, v in facts["usage"].items())
-            print(f"trained {method} on {env}, seed {run.seed}: {usage}; final {_last_metric(curve)}", flush=True)
+            print(f"trained {method} on {env}, seed {run.seed}: {_usage_text(facts['usage'])}; "
+                  f"final {_last_metric(curve)}", flush=True)
+
+
+def _usage_text(usage: dict) -> str:
+    """The training record in one short line: a validation history (a list per epoch, in the checkpoint's
+    ``config.json``) shows as its length and best value."""
+    parts = []
+    for key, value in usage.items():
+        if isinstance(value, list) and value:
+            best = min(value, key=lambda h: h["value"])
+            value = f"{len(value)} epochs, best {best['value']:.4g} at epoch {best['epoch']}"
+        parts.append(f"{key} {value}")
+    return ", ".join(parts)
 
 
 def _last_metric(curve: list[dict]) -> str:
