@@ -123,15 +123,15 @@ def main() -> None:
     if args.decompose and not segments.empty:
         if args.validated:
             segments["epochs"] = "validated"
-        segments["kind"] = segments.operator.str.extract(r"^(\w+)", expand=False)
-        episodes = segments.groupby(["method", "epochs", "fail_prob", "seed"]).n_episodes.first().groupby(
-            ["method", "epochs", "fail_prob"]).sum()
-        d = segments.groupby(["method", "epochs", "fail_prob", "kind"]).agg(
-            segments=("steps", "size"), steps=("steps", "sum"), minimum=("optimal_steps", "sum"),
-            first_right=("first_action_right", "mean"), right=("right_actions", "sum"),
-            reached=("achieved", "mean")).reset_index()
-        n = d.set_index(["method", "epochs", "fail_prob"]).index.map(episodes)
-        d = d.assign(right=d.right / d.steps, segments=d.segments / n, steps=d.steps / n, minimum=d.minimum / n)
+        from hnsdt.evaluation.report import step_decomposition
+
+        by = ["method", "epochs", "fail_prob"]
+        episodes = segments.groupby([*by, "seed"]).n_episodes.first().groupby(by).sum()
+        d = step_decomposition(segments, by).reset_index()
+        n = d.set_index(by).index.map(episodes)
+        d = d.assign(right=d.right / d.steps, segments=d.n / n, steps=d.steps / n, minimum=d.optimal / n).rename(
+            columns={"first": "first_right"})[[*by, "kind", "segments", "steps", "minimum", "first_right", "right",
+                                                "reached"]]
         print("\nwhere the steps go (per episode; minimum: 1 / (1 - fail_prob) per Move, 1 per pick / open):")
         print(d.to_string(index=False, float_format=lambda v: f"{v:.3f}"))
 

@@ -138,7 +138,7 @@ def test_the_achieving_step_loss_counts_only_the_actions_that_achieved_their_sub
     """``loss: achieving`` (a named deviation, docs/paper-arm.md): a hindsight segment's last frame is the one
     whose transition gained the operator's effect; every formulation supervises exactly those frames."""
     from hnsdt.data.segmentation import achieved_operator
-    from hnsdt.models.windows import achieving_frames, make_episodes, window_ends
+    from hnsdt.models.windows import achieving_frames, make_episodes, supervised_frames, window_ends
 
     frames, after = _random_walk_frames(keydoor, 12)
     gained = np.array([achieved_operator(keydoor, SymbolicState.from_observation(keydoor, s),
@@ -151,7 +151,7 @@ def test_the_achieving_step_loss_counts_only_the_actions_that_achieved_their_sub
     assert make_windows(frames, ends, 4, "subgoal", loss="achieving")["loss_mask"].sum() == len(ends)
     starts = np.flatnonzero(np.r_[True, frames.episode[1:] != frames.episode[:-1]])
     lengths = np.diff(np.r_[starts, len(frames)])
-    batch = make_episodes(frames, starts, lengths, "subgoal", loss="achieving")
+    batch = make_episodes(frames, starts, lengths, "subgoal", supervised_frames(frames, "subgoal", "achieving"))
     assert batch["loss_mask"].sum() == gained.sum()
     with pytest.raises(ValueError, match="needs sub-goal labels"):
         window_ends(frames, "return", loss="achieving")

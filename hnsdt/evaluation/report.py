@@ -437,6 +437,15 @@ def paper_arm_lines(summ: pd.DataFrame, results: Path) -> list[str]:
     return lines + decomposition_lines(results, PAPER_ARM[PROPOSED])
 
 
+def step_decomposition(segments: pd.DataFrame, by: list[str]) -> pd.DataFrame:
+    """Sums and shares of ``results/segments.csv`` rows per ``by`` + sub-goal kind (the operator's name up to
+    its bracket): segments, their steps and minimum steps, first actions right, right actions, reached."""
+    kind = segments.operator.str.extract(r"^(\w+)", expand=False).rename("kind")
+    return segments.groupby([*(segments[c] for c in by), kind]).agg(
+        n=("steps", "size"), steps=("steps", "sum"), optimal=("optimal_steps", "sum"),
+        first=("first_action_right", "mean"), right=("right_actions", "sum"), reached=("achieved", "mean"))
+
+
 def decomposition_lines(results: Path, method: str) -> list[str]:
     """Where a plan-following DT's steps go, beside the hand-written controllers under the same planner (the
     floor a perfect executor of those sub-goals reaches): per kind of sub-goal, the steps spent per episode
@@ -457,13 +466,11 @@ def decomposition_lines(results: Path, method: str) -> list[str]:
     episodes = episodes[episodes.method.isin(pair)]
     n_ep = episodes.groupby(["method", "env", "fail_prob"]).size()
     seg = seg.assign(kind=seg.operator.str.extract(r"^(\w+)", expand=False))
-    t = seg.groupby(["method", "env", "fail_prob", "kind"]).agg(
-        n=("steps", "size"), steps=("steps", "sum"), optimal=("optimal_steps", "sum"),
-        first=("first_action_right", "mean"), reached=("achieved", "mean"))
+    t = step_decomposition(seg, ["method", "env", "fail_prob"])
     kinds = sorted(set(seg.kind), key=lambda k: (k not in ("Move", "GoTo"), k))
     head = ["segments / episode", "steps / episode (minimum)", "first action right", "reached"]
     lines = [f"Where the steps of {_label(method)} go, beside {_label(pair[1])} (the same planner, "
-             "hand-written one-cell controllers: the floor of this design), per kind of sub-goal; steps per "
+             "hand-written controllers: the floor of this design), per kind of sub-goal; steps per "
              "episode against the minimum expected for the sub-goals set (1 / (1 − fail_prob) per Move, 1 per "
              "pick / open), all seeds (`results/segments.csv`):", "",
              "| env | fail_prob | sub-goal | " + " | ".join(f"{h}: {m}" for m in ("DT", "controllers") for h in head)

@@ -173,9 +173,8 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         x = self.step_tokens(states, prev_actions, timesteps, subgoal_ids, subgoal_targets, returns)
         slot, valid = cache.advance(rows)
         mask = torch.zeros(valid.shape, device=x.device).masked_fill(~valid, float("-inf"))[:, None, None, :]
-        every = len(rows) == cache.seen.shape[0]  # rows are sorted and distinct: then they are every episode
         for i, layer in enumerate(self.blocks.layers):
-            x = cached_layer(layer, x, cache.keys[i], cache.values[i], None if every else rows, slot, mask)
+            x = cached_layer(layer, x, cache.keys[i], cache.values[i], rows, slot, mask)
         return self.head(self.norm(x))
 
     def forward(self, states, actions, timesteps, pad, subgoal_ids=None, subgoal_targets=None, returns=None):
@@ -262,18 +261,14 @@ class StepCache:
 def cached_layer(layer: nn.TransformerEncoderLayer, x, keys, values, rows, slot, mask) -> torch.Tensor:
     """One pre-norm encoder layer (eval mode) on one new token per row, its key and value written into the
     cache: the same computation as ``layer`` on the whole sequence under :func:`band_mask`. ``rows``: the
-    cache rows of ``x`` (None: every row, in order — no gather); ``mask``: additive, (n, 1, 1, h)."""
+    cache rows of ``x``, sorted and distinct; ``mask``: additive, (n, 1, 1, h)."""
     attn = layer.self_attn
     n, d = x.shape
     heads = attn.num_heads
     q, k, v = F.linear(layer.norm1(x), attn.in_proj_weight, attn.in_proj_bias).view(n, 3, heads, d // heads).unbind(1)
-    if rows is None:
-        index = torch.arange(n, device=x.device)
-        keys[index, :, slot], values[index, :, slot] = k, v
-        mine_k, mine_v = keys, values
-    else:
-        keys[rows, :, slot], values[rows, :, slot] = k, v
-        mine_k, mine_v = keys[rows], values[rows]
-    out = F.scaled_dot_product_attention(q[:, :, None], mine_k, mine_v, attn_mask=mask)
+    keys[rows, :, slot], values[rows, :, slot] = k, v
+    if n < len(keys):  # some episodes are done: gather the live ones (all of them: the cache as it is)
+        keys, values = keys[rows], values[rows]
+    out = F.scaled_dot_product_attention(q[:, :, None], keys, values, attn_mask=mask)
     x = x + attn.out_proj(out.reshape(n, d))
     return x + layer.linear2(layer.activation(layer.linear1(layer.norm2(x))))

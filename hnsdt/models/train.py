@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from hnsdt.models.windows import (Frames, achieving_frames, episode_spans, make_episodes, make_windows,
+from hnsdt.models.windows import (Frames, episode_spans, make_episodes, make_windows, supervised_frames,
                                   window_ends)
 from hnsdt.models.fit import FitState, Objective, Validation, fit, mean_loss
 from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint  # noqa: F401  (re-exported)
@@ -50,9 +50,9 @@ def objective_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, part: s
     if model_cfg.formulation == "episode":
         starts, lengths = episode_spans(frames, cfg.behaviours)
         keep = held[starts]
+        supervised = supervised_frames(frames, model_cfg.condition, cfg.loss)  # once, not per batch
         if model_cfg.condition == "subgoal":  # supervised steps: those with a sub-goal (that achieved it)
-            supervised = achieving_frames(frames) if cfg.loss == "achieving" else frames.subgoals != 0
-            count = np.r_[0, np.cumsum(supervised)]
+            count = np.r_[0, np.cumsum(supervised if supervised is not None else frames.subgoals != 0)]
             keep &= count[starts + lengths] - count[starts] > 0
         starts, lengths = starts[keep], lengths[keep]
         if len(starts) == 0:
@@ -60,7 +60,7 @@ def objective_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, part: s
                              f"{list(cfg.behaviours) or 'any'} in the dataset")
         return Objective(np.arange(len(starts)),
                          lambda rows: make_episodes(frames, starts[rows], lengths[rows], model_cfg.condition,
-                                                    cfg.loss),
+                                                    supervised),
                          lambda rows: int(lengths[rows].sum()), row, sizes=lengths)
     ends = window_ends(frames, model_cfg.condition, cfg.behaviours, cfg.loss)
     ends = ends[held[ends]]

@@ -75,6 +75,11 @@ FORMULATIONS = ("window", "episode")  # a decision transformer's examples: windo
 LOSS_STEPS = ("window", "last", "achieving")
 
 
+def supervised_frames(frames: Frames, condition: str, loss: str) -> np.ndarray | None:
+    """The frames whose actions the loss ``achieving`` counts (:func:`achieving_frames`); None for the others."""
+    return _achieving(frames, condition) if loss == "achieving" else None
+
+
 def _achieving(frames: Frames, condition: str) -> np.ndarray:
     if condition != "subgoal":
         raise ValueError(f"loss 'achieving' needs sub-goal labels; a {condition!r}-conditioned DT has none")
@@ -129,11 +134,11 @@ def episode_spans(frames: Frames, behaviours=()) -> tuple[np.ndarray, np.ndarray
     return starts, lengths
 
 
-def make_episodes(frames: Frames, starts: np.ndarray, lengths: np.ndarray, condition: str, loss: str = "window"
-                  ) -> dict[str, np.ndarray]:
+def make_episodes(frames: Frames, starts: np.ndarray, lengths: np.ndarray, condition: str,
+                  supervised: np.ndarray | None = None) -> dict[str, np.ndarray]:
     """Whole episodes, right-padded to the longest, with each step's own conditioning; the loss counts every
-    real step once (HNSDT: every step with a sub-goal; ``loss="achieving"``: every step that achieved its
-    sub-goal, :func:`achieving_frames`). ``window`` and ``last`` are the same here: each step counts once."""
+    real step once (HNSDT: every step with a sub-goal; of those, only the frames ``supervised`` marks when given,
+    e.g. :func:`achieving_frames` for the loss ``achieving``)."""
     steps = np.arange(lengths.max())
     real = steps[None, :] < lengths[:, None]
     idx = np.where(real, starts[:, None] + steps[None, :], starts[:, None])  # pads read the first frame
@@ -143,8 +148,8 @@ def make_episodes(frames: Frames, starts: np.ndarray, lengths: np.ndarray, condi
         batch["subgoal_ids"] = frames.subgoals[idx]
         batch["subgoal_targets"] = frames.targets[idx]
         batch["loss_mask"] = real & (batch["subgoal_ids"] != 0)
-        if loss == "achieving":
-            batch["loss_mask"] &= _achieving(frames, condition)[idx]
+        if supervised is not None:
+            batch["loss_mask"] &= supervised[idx]
     elif condition == "return":
         batch["returns"] = frames.returns_to_go[idx]
     return batch
