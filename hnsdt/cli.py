@@ -8,6 +8,7 @@ line and exit status 2.
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
@@ -201,7 +202,12 @@ def cmd_generalisation(args) -> None:
     from hnsdt import stages
     from hnsdt.config import compute_settings, load_params
 
-    params = load_params(args.params)
+    drawn = []
+    if args.drawn:  # a folder of the user's maps in place of generalisation.drawn's
+        if args.action != "evaluate":
+            raise ValueError("--drawn is an option of generalisation evaluate")
+        drawn = ["generalisation.drawn=" + json.dumps({"folder": args.drawn, "max_steps": args.drawn_max_steps})]
+    params = load_params(args.params, drawn)
     params.need("generalisation")  # "missing key generalisation" before any work
     if args.action == "collect":
         stages.collect_unseen(params, Path(args.out), progress=not args.quiet)
@@ -308,6 +314,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--curves", help="train: training-curve folder")
     p.add_argument("--models", default="generalisation/models", help="evaluate: checkpoint root, one folder per "
                    "method")
+    p.add_argument("--drawn", help="evaluate: a folder of layout files (*.txt, maps of any shape with the family's "
+                   "keys and doors), the split `drawn` in place of generalisation.drawn's folder")
+    p.add_argument("--drawn-max-steps", type=int, default=250, help="evaluate: the episode step limit on the "
+                   "--drawn maps (default: 250)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     _compute_arguments(p)
     p.set_defaults(func=cmd_generalisation)

@@ -3,9 +3,12 @@
 Protocol (``generalisation`` in params.yaml; README, "Unseen layouts"):
 
 1. **Layouts** (:func:`layout_splits`): ``train`` = the family's generated layouts of seeds ``0..N-1``,
-   ``heldout`` = seeds from :data:`HELDOUT_SEED` on (never in training), ``minigrid`` = grids that the
-   ``minigrid`` package's own DoorKey generator makes, converted to our layouts (our dynamics, not MiniGrid's).
-   Every layout is checked usable (a plan exists, the exact optimum succeeds within ``max_steps``) first.
+   ``heldout`` = seeds from :data:`HELDOUT_SEED` on, ``minigrid`` = grids that the ``minigrid`` package's own
+   DoorKey generator makes, converted to our layouts (our dynamics, not MiniGrid's), ``drawn`` = the layout files
+   of a folder (hand-drawn maps of any shape). ``validation`` (:func:`validation_layouts`, seeds from
+   :data:`VALIDATION_SEED` on) is where training budgets are chosen, and is never evaluated. A generated layout
+   whose grid is already in an earlier split is skipped, so no two splits share a map. Every layout is checked
+   usable (a plan exists, the exact optimum succeeds within ``max_steps``) first.
 2. **Collect** (:func:`collect`): noisy-planner episodes on every training layout (from its start and from random
    states), one LeRobot dataset whose frames also store the local view (``observation.view``) and the layout.
 3. **Train** (:func:`plan_runs`): every method of ``generalisation.methods`` (decision transformers) and
@@ -34,6 +37,7 @@ from hnsdt.methods import METHODS, REFERENCE, resolve
 from hnsdt.methods import method as lookup_method
 
 HELDOUT_SEED = 100_000  # held-out layouts are the family's seeds from here on
+VALIDATION_SEED = 200_000  # and validation layouts from here on
 
 
 @dataclass(frozen=True)
@@ -59,16 +63,49 @@ def training_layouts(params: Params) -> list[Source]:
     return [Source("train", generate(g.family, s), g.max_steps) for s in range(g.train_layouts)]
 
 
-def layout_splits(params: Params, evaluated_only: bool = False) -> list[Source]:
-    """Every layout of the experiment, train first; ``evaluated_only`` keeps the evaluated training layouts only."""
+def _unseen(params: Params, split: str, first_seed: int, n: int, seen: list[Source]) -> list[Source]:
+    """``n`` generated layouts of the family from seed ``first_seed`` on, skipping any grid in ``seen``."""
     from hnsdt.envs.generate import generate
+
+    g, texts, out, seed = settings(params), {s.layout.text for s in seen}, [], first_seed
+    while len(out) < n:
+        layout = generate(g.family, seed)
+        if layout.text not in texts:
+            out.append(Source(split, layout, g.max_steps))
+        seed += 1
+    return out
+
+
+def validation_layouts(params: Params) -> list[Source]:
+    """The layouts budgets are chosen on: seeds from :data:`VALIDATION_SEED`, none a training or held-out grid."""
+    train = training_layouts(params)
+    seen = train + _unseen(params, "heldout", HELDOUT_SEED, settings(params).heldout_layouts, train)
+    return _unseen(params, "validation", VALIDATION_SEED, settings(params).validation_layouts, seen)
+
+
+def drawn_layouts(folder: str | Path, max_steps: int) -> list[Source]:
+    """Every layout file (``*.txt``) of ``folder``, by name, as the split ``drawn``."""
+    from hnsdt.envs.layout import load_layout
+
+    files = sorted(Path(folder).glob("*.txt"))
+    if not files:
+        raise ValueError(f"generalisation.drawn.folder {folder}: no layout files (*.txt) there")
+    return [Source("drawn", load_layout(f), max_steps) for f in files]
+
+
+def layout_splits(params: Params, evaluated_only: bool = False) -> list[Source]:
+    """Every evaluated layout of the experiment, train first; ``evaluated_only`` keeps the evaluated training
+    layouts only."""
     from hnsdt.envs.minigrid_adapter import from_minigrid
 
     g = settings(params)
-    out = training_layouts(params)[:g.evaluated_train_layouts] if evaluated_only else training_layouts(params)
-    out += [Source("heldout", generate(g.family, HELDOUT_SEED + s), g.max_steps) for s in range(g.heldout_layouts)]
+    train = training_layouts(params)
+    out = train[:g.evaluated_train_layouts] if evaluated_only else list(train)
+    out += _unseen(params, "heldout", HELDOUT_SEED, g.heldout_layouts, train)
     for src in g.minigrid:
         out += [Source("minigrid", from_minigrid(src.id, s), src.max_steps) for s in range(src.layouts)]
+    if g.drawn is not None:
+        out += drawn_layouts(g.drawn.folder, g.drawn.max_steps)
     return out
 
 
@@ -76,10 +113,11 @@ def check_sources(sources: list[Source], fail_prob: float) -> None:
     """Every layout usable at the highest failure probability, and all with the same flags (one network)."""
     from hnsdt.envs.generate import check_usable
 
-    flags = {src.layout.n_flags for src in sources}
-    if len(flags) > 1:
-        raise ValueError(f"generalisation: the layouts have different flag counts {sorted(flags)} (a family and "
-                         "MiniGrid sources with other numbers of keys, doors or items cannot share one network)")
+    for src in sources:
+        if src.layout.n_flags != sources[0].layout.n_flags:
+            raise ValueError(f"generalisation: layout {src.name} ({src.split}) has {src.layout.n_flags} keys, doors "
+                             f"and items, the {sources[0].split} layouts {sources[0].layout.n_flags} (one network "
+                             "reads every split's flags)")
     for src in sources:
         check_usable(src.layout, src.max_steps, fail_prob)
 
@@ -130,16 +168,16 @@ def collect(params: Params, root: str | Path, provenance: dict, progress: bool =
 
 
 def network_configs(params: Params, method: str, seed: int):
-    """``(view network config, training config)`` of one method and seed. The network is sized for every layout
-    of the experiment (the largest target offset, the longest episode)."""
+    """``(view network config, training config)`` of one method and seed. Nothing in them depends on the maps
+    the method is evaluated on: targets are clamped at ``generalisation.max_offset``, timesteps at the training
+    episodes' limit."""
     from hnsdt.models.view import view_config
 
     g = settings(params)
     entry = lookup_method(method)
     if not entry.view_network:
         raise ValueError(f"generalisation: {method} has no network that reads views")
-    sources = layout_splits(params)
-    lay = sources[0].layout
+    lay = training_layouts(params)[0].layout
     env = EnvSpec(g.family, f"hnsdt/generated-{g.family}", lay, g.max_steps)
     view_cls = resolve(entry.view_network).config_class
     if entry.stage == "train":  # a decision transformer: `train` and `models.<family>`
@@ -147,16 +185,17 @@ def network_configs(params: Params, method: str, seed: int):
         if g.family not in models:
             raise params.error(f"missing key models.{g.family} (the decision transformers' size on the "
                                f"generalisation family {g.family})")
-        max_offset = max(max(s.layout.shape) for s in sources) - 1  # targets relative to the agent
         try:
-            cfg = view_config(entry.condition, lay.n_flags, g.view_radius, max_offset,
-                              max_timestep=max(s.max_steps for s in sources), dropout=params.train.dropout,
+            cfg = view_config(entry.condition, lay.n_flags, g.view_radius, g.max_offset,
+                              max_timestep=g.max_steps, dropout=params.train.dropout,
                               formulation=ts.formulation[method],
                               **models[g.family].model_dump())
         except ValueError as e:
             raise params.error(f"models.{g.family}: {e}") from None
         train_cfg = ts.method_config(method, seed)
-        if ts.measure.get(method, ("loss",))[0] != "loss":  # acting from held-out states needs one fixed map:
+        if method in ts.budget and g.validation_layouts:  # the budget's measure acts on the validation layouts:
+            train_cfg = replace(train_cfg, validation=0.0)  # every training episode trains
+        elif ts.measure.get(method, ("loss",))[0] != "loss":  # acting from held-out states needs one fixed map:
             train_cfg = replace(train_cfg, validation=0.0, epochs=ts.config.epochs)  # here, train.epochs
         return cfg, _budget(params, method, train_cfg)
     bs = baseline_settings(params, method, env, seed)
@@ -204,7 +243,15 @@ def plan_runs(params: Params, method: str, dataset: str | Path) -> list:
     if not online and wanted and not np.isin(data.policy, wanted).any():
         raise ValueError(f"{method} learns from {wanted} episodes and {dataset} holds none; set "
                          "generalisation.random_episodes_per_layout > 0 (random walks) and collect again")
-    return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data, facts) for seed in g.seeds]
+    measure = None
+    ts = train_settings(params) if lookup_method(method).stage == "train" else None
+    if ts is not None and method in ts.budget and g.validation_layouts:
+        from hnsdt.training import StepsToExit
+
+        measure = StepsToExit.on_layouts([s.layout for s in validation_layouts(params)], g.max_steps,
+                                         ts.measure[method][1], method, method_executor(params, method), facts)
+    return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data, facts, measure=measure)
+            for seed in g.seeds]
 
 
 # -- evaluation -------------------------------------------------------------------------------------------
@@ -273,6 +320,7 @@ def evaluate(params: Params, models_root: str | Path, out_dir: str | Path, compu
     table = pd.DataFrame([row for batches in results for rows in batches for row in rows])
     optimal = {(s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fps}
     table["optimal_steps"] = [optimal[(n, fp)][0] for n, fp in zip(table["layout"], table["fail_prob"])]
+    table["optimal_success"] = [optimal[(n, fp)][1] for n, fp in zip(table["layout"], table["fail_prob"])]
     with atomic_dir(Path(out_dir)) as tmp:
         tmp.mkdir()
         table.to_csv(tmp / "episodes.csv", index=False, float_format="%.6g")
@@ -285,14 +333,14 @@ def evaluate(params: Params, models_root: str | Path, out_dir: str | Path, compu
 
 def summary(table: pd.DataFrame) -> pd.DataFrame:
     """Per method × split × fail_prob: success and steps / optimum (successful episodes), mean and std over
-    seeds; each seed's values are means over its layouts' episodes."""
+    seeds; each seed's values are means over its layouts' episodes; the exact optimum's success beside them."""
     t = table.assign(ratio=np.where(table["success"], table["steps"] / table["optimal_steps"], np.nan))
     per_seed = t.groupby(["method", "split", "fail_prob", "seed"], sort=False).agg(
-        success=("success", "mean"), steps_ratio=("ratio", "mean")).reset_index()
+        success=("success", "mean"), steps_ratio=("ratio", "mean"), optimal=("optimal_success", "mean")).reset_index()
     out = per_seed.groupby(["method", "split", "fail_prob"], sort=False).agg(
         success_mean=("success", "mean"), success_std=("success", "std"),
         steps_ratio_mean=("steps_ratio", "mean"), steps_ratio_std=("steps_ratio", "std"),
-        seeds=("seed", "nunique")).reset_index()
+        optimal_success=("optimal", "mean"), seeds=("seed", "nunique")).reset_index()
     layouts = table.groupby("split")["layout"].nunique()
     out["layouts"] = out["split"].map(layouts)
     return out

@@ -151,6 +151,11 @@ class MiniGridSource(Section):
     max_steps: PositiveInt = Field(description="episode step limit on these grids")
 
 
+class DrawnSource(Section):
+    folder: str = Field(description="a folder of layout files (*.txt), e.g. hand-drawn maps")
+    max_steps: PositiveInt = Field(description="episode step limit on these maps")
+
+
 class GeneralisationParams(Section):
     """The unseen-layout experiment (README, "Unseen layouts"): learners that read the grid around the agent,
     trained on generated layouts, evaluated on them, on held-out ones and on MiniGrid's grids."""
@@ -159,7 +164,14 @@ class GeneralisationParams(Section):
     train_layouts: PositiveInt = Field(description="training layouts: the family's seeds 0..N-1")
     heldout_layouts: int = Field(ge=0, description="held-out layouts: seeds 100000.. (never in training)")
     evaluated_train_layouts: int = Field(ge=0, description="the first this many training layouts are evaluated")
+    validation_layouts: int = Field(0, ge=0, description="validation layouts: seeds 200000.., never in training or "
+                                    "evaluation; each DT with a train.validation entry trains to the plateau of its "
+                                    "steps to the exit on them (0: the paper protocol's train.validation)")
     minigrid: list[MiniGridSource] = Field(default_factory=list, description="MiniGrid grids, zero-shot")
+    drawn: DrawnSource | None = Field(None, description="a folder of layout files (maps of any shape), zero-shot")
+    max_offset: PositiveInt = Field(7, description="a sub-goal target further than this many cells along an axis "
+                                    "reads as this far (its direction kept): fixed, so no network depends on the "
+                                    "maps it is evaluated on")
     max_steps: PositiveInt = Field(description="episode step limit on generated layouts")
     view_radius: PositiveInt = Field(2, description="the learners see (2r+1) x (2r+1) cells around the agent")
     episodes_per_layout: PositiveInt = Field(description="noisy-planner episodes per training layout and start "

@@ -37,49 +37,80 @@ class TrainTask:
 
 
 @dataclass(frozen=True)
-class StepsToExit:
-    """A validation measure by acting (``train.validation.<method>.measure: steps``): the mean episode length of
-    the method's own agent from start states drawn from the held-out episodes, on the method's map at fail_prob
-    0, a failure counting the step limit. Lower is better; it reads the success and the steps the evaluation
-    reports, on states no training episode contains. Deterministic: greedy agents, no failures."""
+class Course:
+    """Start states on one map, for :class:`StepsToExit`."""
 
-    method: str
     layout: Any
     max_steps: int
-    executor: Any  # the method's ExecutorConfig
     starts: np.ndarray  # (n, d) environment states
+
+
+@dataclass(frozen=True)
+class StepsToExit:
+    """A validation measure by acting (``train.validation.<method>.measure: steps``): the mean episode length of
+    the method's own agent from its start states at fail_prob 0, a failure counting the step limit. Lower is
+    better; it reads the success and the steps the evaluation reports, on states no training episode contains:
+    drawn from the held-out episodes of the method's map (:meth:`from_held_out`), or on validation layouts no
+    training episode saw (:meth:`on_layouts`, the unseen-layout experiment). Deterministic: greedy agents, no
+    failures."""
+
+    method: str
+    executor: Any  # the method's ExecutorConfig
     facts: dict  # the checkpoint's facts the agent reads (the pure DT's target return)
+    courses: tuple[Course, ...]
     name: str = "steps"
 
     @classmethod
     def from_held_out(cls, frames, held_out: np.ndarray, n: int, method: str, env: EnvSpec, executor,
                       facts: dict) -> "StepsToExit":
         """``n`` distinct states of the held-out frames (fixed draw) from which the planner reaches the exit."""
-        from hnsdt.symbolic import NoPlanError, SymbolicState, plan
-
-        states = np.unique(frames.states[held_out], axis=0)
-        solvable = []
-        for s in states:
-            try:
-                plan(env.layout, SymbolicState.from_observation(env.layout, s), executor.plan_mode, executor.operators)
-                solvable.append(s)
-            except NoPlanError:
-                pass
-        if not solvable:
+        solvable = _solvable(env.layout, np.unique(frames.states[held_out], axis=0), executor)
+        if not len(solvable):
             raise ValueError(f"{method} on {env.name}: no held-out state from which the exit can be reached; "
                              "raise train.validation.<method>.share")
-        solvable = np.array(solvable)
         pick = np.random.default_rng(0).choice(len(solvable), size=min(n, len(solvable)), replace=False)
-        return cls(method, env.layout, env.max_steps, executor, solvable[np.sort(pick)], facts)
+        return cls(method, executor, facts, (Course(env.layout, env.max_steps, solvable[np.sort(pick)]),))
+
+    @classmethod
+    def on_layouts(cls, layouts: list, max_steps: int, n: int, method: str, executor, facts: dict) -> "StepsToExit":
+        """About ``n`` start states spread over ``layouts``: each layout's start, then distinct random states
+        (fixed draw, as the collection's random starts) from which the planner reaches the exit."""
+        from hnsdt.data.collect import random_start_states
+        from hnsdt.envs.dynamics import Rules
+
+        per_layout = max(1, -(-n // len(layouts)))
+        courses = []
+        for i, layout in enumerate(layouts):
+            drawn = random_start_states(layout, 4 * per_layout, np.random.default_rng([i, 4099]))
+            states = _solvable(layout, np.vstack([Rules(layout).initial_states(1), drawn]), executor)
+            _, first = np.unique(states, axis=0, return_index=True)  # distinct, in draw order (the start first)
+            courses.append(Course(layout, max_steps, states[np.sort(first)[:per_layout]]))
+        return cls(method, executor, facts, tuple(courses))
 
     def __call__(self, model) -> float:
         from hnsdt.agents.rollout import rollout
         from hnsdt.envs.vector import KeyDoorVectorEnv
 
-        agent = resolve(METHODS[self.method].agent)(model, self.facts, self.layout, self.executor)
-        env = KeyDoorVectorEnv(len(self.starts), self.layout, 0.0, self.max_steps)
-        episodes = rollout(env, agent, seed=0, start_states=self.starts)
-        return float(np.mean([e.length if e.success else self.max_steps for e in episodes]))
+        lengths = []
+        for c in self.courses:
+            agent = resolve(METHODS[self.method].agent)(model, self.facts, c.layout, self.executor)
+            env = KeyDoorVectorEnv(len(c.starts), c.layout, 0.0, c.max_steps)
+            lengths += [e.length if e.success else c.max_steps for e in rollout(env, agent, 0, c.starts)]
+        return float(np.mean(lengths))
+
+
+def _solvable(layout, states: np.ndarray, executor) -> np.ndarray:
+    """The states from which the method's planner finds a plan to the exit."""
+    from hnsdt.symbolic import NoPlanError, SymbolicState, plan
+
+    keep = []
+    for s in states:
+        try:
+            plan(layout, SymbolicState.from_observation(layout, s), executor.plan_mode, executor.operators)
+            keep.append(True)
+        except NoPlanError:
+            keep.append(False)
+    return states[np.array(keep, dtype=bool)]
 
 
 def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: Path) -> list[TrainTask]:

@@ -2,14 +2,19 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+import yaml
 
 from hnsdt.envs import KeyDoorVectorEnv, LayoutError, load_layout
 from hnsdt.envs.generate import FAMILIES, FamilySizes, check_usable, generate, write_layout
 from hnsdt.params import validate
 from hnsdt.envs.observation import (DOOR_CLOSED, DOOR_OPEN, EXIT, FLOOR, ITEM, KEY, OUTSIDE, WALL, full_view,
                                     local_view)
+
+REPO = Path(__file__).resolve().parent.parent
 
 
 @pytest.mark.parametrize("family", FAMILIES)
@@ -211,6 +216,7 @@ def _tiny_generalisation_params(tmp_path) -> dict:
     tiny_params(path)
     params = yaml.safe_load(path.read_text())
     params["envs"]["keydoor"]["layout"] = str(REPO / params["envs"]["keydoor"]["layout"])
+    params["generalisation"]["drawn"]["folder"] = str(REPO / params["generalisation"]["drawn"]["folder"])
     return params
 
 
@@ -329,6 +335,9 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     params = _tiny_generalisation_params(tmp_path)
     g = params["generalisation"]
     g.update(methods=["hnsdt"], baselines=["gru", "dqn"])
+    (tmp_path / "drawn").mkdir()  # one hand-drawn map, of a size no training layout has
+    (tmp_path / "drawn/corridor.txt").write_text((REPO / "layouts/drawn/corridor_5x13.txt").read_text())
+    g["drawn"]["folder"] = str(tmp_path / "drawn")
     dataset = gen.collect(validate(params), tmp_path / "ds", {}, progress=False)
     for method in g["methods"] + g["baselines"]:
         (run,) = gen.plan_runs(validate(params), method, dataset)
@@ -337,11 +346,11 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
         save_checkpoint(model, tmp_path / "models" / method / "seed0", {"method": method, **facts})
     table = gen.evaluate(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1), progress=False)
     assert set(table.method) == {"hnsdt", "gru", "dqn", "symbolic"}
-    assert set(table.split) == {"train", "heldout", "minigrid"}
-    assert len(table) == 4 * 3 * 2 * 2
+    assert set(table.split) == {"train", "heldout", "minigrid", "drawn"}
+    assert len(table) == 4 * 4 * 2 * 2
     assert (table.optimal_steps > 0).all() and table[table.method == "symbolic"].success.all()
     summary = pd.read_csv(tmp_path / "results/summary.csv")
-    assert len(summary) == 4 * 3 * 2 and summary.success_mean.between(0, 1).all()
+    assert len(summary) == 4 * 4 * 2 and summary.success_mean.between(0, 1).all()
     with pytest.raises(ValueError, match="not in generalisation.methods"):
         gen.plan_runs(validate(params), "options", dataset)
 
@@ -401,4 +410,108 @@ def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operator
     model, facts, _ = train_run(run)
     save_checkpoint(model, tmp_path / "models/hnsdt_paper/seed0", {"method": "hnsdt_paper", **facts})
     table = gen.evaluate(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1), progress=False)
-    assert set(table.method) == {"hnsdt_paper", "symbolic"} and set(table.split) == {"train", "heldout", "minigrid"}
+    assert set(table.method) == {"hnsdt_paper", "symbolic"}
+    assert set(table.split) == {"train", "heldout", "minigrid", "drawn"}
+
+
+def test_no_two_splits_share_a_map_and_validation_is_never_evaluated():
+    """The default experiment's training, validation, held-out, MiniGrid and hand-drawn maps are pairwise
+    distinct grids; a generated grid already in an earlier split is skipped, not reused."""
+    from hnsdt import generalisation as gen
+    from hnsdt.config import load_params
+    from hnsdt.envs.generate import generate
+
+    params = load_params(REPO / "params.yaml", [f"generalisation.drawn.folder={REPO / 'layouts/drawn'}"])
+    evaluated, validation = gen.layout_splits(params), gen.validation_layouts(params)
+    g = params.generalisation
+    assert len(validation) == g.validation_layouts > 0 and {s.split for s in validation} == {"validation"}
+    assert {s.split for s in evaluated} == {"train", "heldout", "minigrid", "drawn"}
+    texts = [s.layout.text for s in evaluated + validation]
+    assert len(set(texts)) == len(texts)
+    first = generate(g.family, gen.VALIDATION_SEED)
+    seen = [gen.Source("train", first, 10)]
+    assert gen._unseen(params, "validation", gen.VALIDATION_SEED, 1, seen)[0].layout == generate(
+        g.family, gen.VALIDATION_SEED + 1)
+
+
+def test_no_network_depends_on_the_maps_it_is_evaluated_on(tmp_path):
+    """Bigger evaluation maps (MiniGrid 16x16 with longer episodes), other held-out and hand-drawn ones: the
+    same network and training configs; targets further than ``max_offset`` are clamped, direction kept."""
+    import torch
+
+    from hnsdt import generalisation as gen
+    from hnsdt.models.view import ViewDecisionTransformer
+
+    params = _tiny_generalisation_params(tmp_path)
+    before = {m: gen.network_configs(validate(params), m, 0) for m in ("hnsdt", "pure_dt", "gru")}
+    params["generalisation"].update(
+        heldout_layouts=3, drawn=None,
+        minigrid=[{"id": "MiniGrid-DoorKey-16x16-v0", "layouts": 1, "max_steps": 250}])
+    after = {m: gen.network_configs(validate(params), m, 0) for m in ("hnsdt", "pure_dt", "gru")}
+    assert before == after
+    cfg, _ = before["hnsdt"]
+    assert cfg.max_offset == params["generalisation"]["max_offset"]
+    net = ViewDecisionTransformer(cfg)
+    m = cfg.max_offset
+    states = torch.tensor([[3, 3], [0, 0], [14, 14]])
+    targets = torch.tensor([[3 + m + 8, 0], [-1, -1], [0, 15]])  # (-1: no target)
+    assert net.subgoal_targets(states, targets).tolist() == [[2 * m, m - 3], [-1, -1], [0, m + 1]]
+
+
+def test_the_dts_budget_is_chosen_on_the_validation_layouts(tmp_path):
+    """A DT with a ``train.validation`` entry trains on every training episode and stops at the plateau of its
+    steps to the exit from the validation layouts' start (and random) states; a baseline keeps its budget."""
+    from hnsdt import generalisation as gen
+
+    params = _tiny_generalisation_params(tmp_path)
+    params["generalisation"].update(methods=["hnsdt"], baselines=["gru"], validation_layouts=2)
+    params["train"]["validation"]["hnsdt"].update(starts=6, max_epochs=4)
+    dataset = gen.collect(validate(params), tmp_path / "ds", {}, progress=False)
+    (run,) = gen.plan_runs(validate(params), "hnsdt", dataset)
+    validation = gen.validation_layouts(validate(params))
+    assert run.train_cfg.validation == 0.0 and run.train_cfg.epochs == 4
+    assert [c.layout for c in run.measure.courses] == [s.layout for s in validation]
+    for course, src in zip(run.measure.courses, validation):
+        assert len(course.starts) == 3 and (course.starts[0, :2] == src.layout.start).all()
+    (baseline,) = gen.plan_runs(validate(params), "gru", dataset)
+    assert baseline.measure is None
+    params["generalisation"]["validation_layouts"] = 0  # the paper protocol's budget
+    (run,) = gen.plan_runs(validate(params), "hnsdt", dataset)
+    assert run.measure is None and run.train_cfg.validation == params["train"]["validation"]["hnsdt"]["share"]
+
+
+def test_a_folder_of_drawn_maps_is_checked_with_one_line_naming_the_problem(tmp_path):
+    from hnsdt import generalisation as gen
+    from hnsdt.cli import main
+
+    params = _tiny_generalisation_params(tmp_path)
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(ValueError, match=r"generalisation.drawn.folder .*empty: no layout files \(\*.txt\)"):
+        gen.drawn_layouts(tmp_path / "empty", 100)
+    (tmp_path / "two").mkdir()
+    (tmp_path / "two/two_keys.txt").write_text("@.a.b\n##A##\n..B.G\n")
+    params["generalisation"]["drawn"]["folder"] = str(tmp_path / "two")
+    with pytest.raises(ValueError, match=r"layout .*two_keys.txt \(drawn\) has 4 keys, doors and items, the "
+                                         r"train layouts 2"):
+        gen.check_sources(gen.layout_splits(validate(params), evaluated_only=True), 0.1)
+    path = tmp_path / "params.yaml"
+    path.write_text(yaml.safe_dump(params))
+    code = main(["--params", str(path), "generalisation", "evaluate", "--out", str(tmp_path / "r"),
+                 "--drawn", str(tmp_path / "empty"), "--quiet"])
+    assert code == 2 and not (tmp_path / "r").exists()
+
+
+def test_the_report_says_per_unseen_split_whether_hnsdt_meets_the_target_and_by_how_much():
+    import pandas as pd
+
+    from hnsdt.evaluation.report import target_lines
+
+    rows = [("hnsdt", "train", 0.0, 0.5, 3.0), ("hnsdt", "heldout", 0.0, 0.99, 1.05), ("hnsdt", "heldout", 0.3, 0.96, 1.08),
+            ("hnsdt", "drawn", 0.0, 1.0, 1.02), ("hnsdt", "drawn", 0.3, 0.90, 1.30), ("gru", "drawn", 0.0, 0.0, None)]
+    summ = pd.DataFrame(rows, columns=["method", "split", "fail_prob", "success_mean", "steps_ratio_mean"])
+    summ["optimal_success"] = 1.0
+    assert target_lines(summ) == [
+        "held-out layouts: met — lowest success 0.960 of the optimum's (fail_prob 0.3), most steps 1.08× the "
+        "optimum's (fail_prob 0.3)",
+        "hand-drawn maps: short — lowest success 0.900 of the optimum's (fail_prob 0.3), most steps 1.30× the "
+        "optimum's (fail_prob 0.3)"]

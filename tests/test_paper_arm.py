@@ -168,8 +168,9 @@ def test_the_steps_measure_acts_from_held_out_states_and_keys_the_record(keydoor
     held = validation_episodes(frames, 0.25)
     env = EnvSpec("keydoor", "hnsdt/KeyDoor-v0", keydoor, 30)
     measure = StepsToExit.from_held_out(frames, held, 16, "hnsdt_paper", env, MOVE, {})
-    assert len(measure.starts) == 16 and len(np.unique(measure.starts, axis=0)) == 16
-    assert all((frames.states[held] == s).all(1).any() for s in measure.starts)
+    (course,) = measure.courses
+    assert len(course.starts) == 16 and len(np.unique(course.starts, axis=0)) == 16
+    assert all((frames.states[held] == s).all(1).any() for s in course.starts)
     cfg = DTConfig("subgoal", keydoor.n_flags, *keydoor.shape, context=4, n_layers=1, d_model=32, max_timestep=100,
                    formulation="episode")
     tc = TrainConfig(epochs=3, batch_size=64, seed=0, validation=0.25, patience=5, device="cpu")

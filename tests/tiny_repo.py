@@ -46,6 +46,7 @@ def tiny_params(path: Path) -> None:
     params["generalisation"].update(train_layouts=3, evaluated_train_layouts=1, heldout_layouts=1, seeds=[0],
                                     episodes_per_layout=2, episodes=2, budgets={})  # the tiny knobs above
     params["generalisation"]["minigrid"] = [{"id": "MiniGrid-DoorKey-8x8-v0", "layouts": 1, "max_steps": 100}]
+    params["generalisation"]["validation_layouts"] = 1
     path.write_text(yaml.safe_dump(params, sort_keys=False))
 
 

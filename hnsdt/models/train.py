@@ -29,9 +29,10 @@ class TrainConfig:
     log_every: int = 10  # one training-curve row per this many steps
     behaviours: tuple[str, ...] = ()  # train on episodes of these collection behaviours (empty = all)
     loss: str = "window"  # the steps the loss counts: "window", "last" or "achieving" (hnsdt.models.windows)
-    validation: float = 0.0  # > 0: this share of the episodes (of each behaviour) is held out, its loss measured
-    #                          after each epoch; training stops once it has not improved for `patience` epochs
-    #                          (`epochs` is then the cap) and keeps the best epoch's weights
+    validation: float = 0.0  # > 0: this share of the episodes (of each behaviour) is held out, its loss (or the
+    #                          trainer's `measure`) measured after each epoch; training stops once it has not
+    #                          improved for `patience` epochs (`epochs` is then the cap) and keeps the best epoch's
+    #                          weights. A `measure` on other data (validation layouts) stops training with 0 here
     patience: int = 2
 
 
@@ -72,9 +73,9 @@ def objective_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, part: s
 
 
 def validation_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, measure=None) -> Validation | None:
-    """The stopping measure, when ``cfg.validation`` > 0: ``measure(model)`` if given (lower is better; e.g.
-    :class:`hnsdt.training.StepsToExit`), else the loss on the held-out episodes."""
-    if cfg.validation <= 0:
+    """The stopping measure: ``measure(model)`` if given (lower is better; e.g. :class:`hnsdt.training.StepsToExit`),
+    else, when ``cfg.validation`` > 0, the loss on the held-out episodes."""
+    if measure is None and cfg.validation <= 0:
         return None
     if measure is None:
         held_out = objective_for(frames, model_cfg, cfg, "validation")
