@@ -1,12 +1,12 @@
 """The unseen-layout experiment (hnsdt.generalisation) outside the pipeline: other families, sizes, budgets.
 
 Runs the three stages' functions — collect on the training layouts, train each method on views, evaluate on
-the training, held-out and MiniGrid layouts — in a temporary folder, with params.yaml's `generalisation`
+the training, held-out, MiniGrid and hand-drawn layouts — in a temporary folder, with params.yaml's `generalisation`
 section changed from the command line, and prints the table the report shows (success and steps / optimal per
 method and split, averaged over the failure probabilities) and the time each part took.
 
 Run: python benchmarks/generalisation.py [--family multikeydoor] [--train-layouts 40] [--heldout-layouts 10]
-     [--seeds 0 1 2] [--methods hnsdt pure_dt] [--episodes 10] [--no-minigrid] [--set KEY=VALUE ...]
+     [--seeds 0 1 2] [--methods hnsdt pure_dt] [--episodes 10] [--no-minigrid] [--no-drawn] [--set KEY=VALUE ...]
 (`--set` takes a `generalisation` key as YAML, e.g. `--set max_steps=250 --set 'budgets={gru: {epochs: 20}}'`.)
 """
 
@@ -27,9 +27,10 @@ from hnsdt import generalisation as gen  # noqa: E402
 from hnsdt.config import compute_settings, load_params  # noqa: E402
 from hnsdt.params import validate  # noqa: E402
 from hnsdt.evaluation.report import SPLIT_LABELS, generalisation_table  # noqa: E402
+from hnsdt.models.checkpoint import load_checkpoint  # noqa: E402
 from hnsdt.training import train_all  # noqa: E402
 
-MAX_STEPS = {"keydoor": 100, "multikeydoor": 250}
+MAX_STEPS = {"keydoor": 100, "multikeydoor": 250, "keydoor_obstacles": 150, "keydoor_maze": 150}
 
 
 def main() -> None:
@@ -42,12 +43,14 @@ def main() -> None:
     ap.add_argument("--methods", nargs="+")
     ap.add_argument("--episodes", type=int, help="evaluation episodes per layout and fail_prob")
     ap.add_argument("--no-minigrid", action="store_true", help="no MiniGrid split (a family whose flags differ)")
+    ap.add_argument("--no-drawn", action="store_true", help="no hand-drawn split (a family whose flags differ)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = ap.parse_args()
     raw = copy.deepcopy(load_params(args.params).raw)
     g = raw["generalisation"]
     if args.family:
         g.update(family=args.family, max_steps=MAX_STEPS[args.family])
+        raw["models"].setdefault(args.family, raw["models"]["keydoor"])  # (the DTs' size: Case 1's if not set)
     for key, value in (("train_layouts", args.train_layouts), ("heldout_layouts", args.heldout_layouts),
                        ("seeds", args.seeds), ("episodes", args.episodes)):
         if value is not None:
@@ -59,13 +62,15 @@ def main() -> None:
         g["baselines"] = [m for m in args.methods if m not in DT_METHODS]
     if args.no_minigrid or args.family == "multikeydoor":
         g["minigrid"] = []
+    if args.no_drawn or args.family == "multikeydoor":
+        g["drawn"] = None
     for item in args.set:
         key, _, value = item.partition("=")
         g[key] = yaml.safe_load(value)
     g["evaluated_train_layouts"] = min(g["evaluated_train_layouts"], g["train_layouts"])
     params = validate(raw, f"{args.params} with the command line's changes")
     compute = compute_settings(params)
-    times = {}
+    times, validation = {}, []
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         t0 = time.perf_counter()
@@ -76,6 +81,11 @@ def main() -> None:
             train_all(gen.plan_runs(params, method, dataset), g["family"], tmp / "models" / method,
                       tmp / "curves" / method, compute, progress=False)
             times[f"train {method}"] = time.perf_counter() - t0
+            for seed in g["seeds"]:  # the budget's measure on the validation layouts (choices are made on it)
+                usage = load_checkpoint(tmp / "models" / method / f"seed{seed}")[1].get("usage", {})
+                if usage.get("validation_steps"):
+                    best = min(usage["validation_steps"], key=lambda h: h["value"])
+                    validation.append(f"{method} seed {seed}: {best['value']:.2f} steps at epoch {best['epoch']}")
         t0 = time.perf_counter()
         gen.evaluate(params, tmp / "models", tmp / "results", compute, progress=False)
         times["evaluate"] = time.perf_counter() - t0
@@ -87,6 +97,9 @@ def main() -> None:
     for r in table.itertuples():
         print(f"| {r.method} | {SPLIT_LABELS.get(r.split, r.split)} | {r.success:.3f} ± {r.success_std:.3f} | "
               f"{r.steps_ratio:.2f} |")
+    if validation:
+        print(f"\nvalidation layouts ({g['validation_layouts']}), mean steps to the exit at fail_prob 0 of the "
+              "epoch kept: " + "; ".join(validation))
     print("\n" + ", ".join(f"{k} {v:.0f} s" for k, v in times.items()) + f"; total {sum(times.values()):.0f} s")
 
 

@@ -24,7 +24,8 @@ def test_same_family_and_seed_same_layout_and_seeds_differ(family):
     assert len(texts) == 40  # 40 seeds, 40 different worlds
 
 
-@pytest.mark.parametrize("family, max_steps", [("keydoor", 100), ("multikeydoor", 250)])
+@pytest.mark.parametrize("family, max_steps", [("keydoor", 100), ("multikeydoor", 250), ("keydoor_obstacles", 150),
+                                               ("keydoor_maze", 150)])
 def test_every_generated_layout_is_solvable_by_the_planner_and_the_optimum(family, max_steps):
     for seed in range(25):
         layout = generate(family, seed)
@@ -45,6 +46,29 @@ def test_the_families_have_the_papers_structure():
         assert two.keys["a"] in closed and two.keys["b"] not in closed and two.items["1"] not in closed
         after_a = reachable_cells(two, two.start, {"A"})
         assert two.keys["b"] in after_a and two.items["2"] not in after_a and two.goal not in after_a
+
+
+@pytest.mark.parametrize("family", ["keydoor_obstacles", "keydoor_maze"])
+def test_the_families_with_walls_inside_keep_case_1s_structure_and_make_the_agent_walk_round_walls(family):
+    """``keydoor_obstacles`` and ``keydoor_maze``: one key before one locked door, the exit behind it, and
+    (unlike ``keydoor``, whose rooms are open) cells from which the shortest path to the key is several steps
+    longer than the straight-line distance: few with short obstacles, many in the mazes."""
+    from hnsdt.envs.layout import reachable_cells
+
+    def long_detours(layout):  # share of the cells reaching the key whose path is >= 4 steps over Manhattan
+        key = layout.keys["a"]
+        return np.mean([d - abs(r - key[0]) - abs(c - key[1]) >= 4
+                        for (r, c), d in reachable_cells(layout, key, set()).items()])
+
+    share = {}
+    for fam in ("keydoor", family):
+        layouts = [generate(fam, seed) for seed in range(20)]
+        for lay in layouts:
+            assert (list(lay.keys), list(lay.doors), list(lay.items)) == (["a"], ["A"], [])
+            assert lay.keys["a"] in reachable_cells(lay, lay.start, set())
+            assert lay.goal not in reachable_cells(lay, lay.start, set())  # the door is needed
+        share[fam] = np.mean([long_detours(lay) for lay in layouts])
+    assert share["keydoor"] == 0 and share[family] > {"keydoor_obstacles": 0.01, "keydoor_maze": 0.1}[family]
 
 
 def test_impossible_sizes_stop_with_one_line():
@@ -358,7 +382,7 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
 def test_a_bad_generalisation_knob_is_one_line_naming_it(tmp_path):
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"]["family"] = "maze"
-    with pytest.raises(ValueError, match=r"^params: generalisation.family: Input should be 'keydoor' or"):
+    with pytest.raises(ValueError, match=r"^params: generalisation.family: Input should be 'keydoor', .*'keydoor_maze', got 'maze'"):
         validate(params)
     params["generalisation"].update(family="keydoor", methods=["hnsdt", "hnsdt"])
     with pytest.raises(ValueError, match="generalisation.methods: must not repeat"):
@@ -507,11 +531,13 @@ def test_the_report_says_per_unseen_split_whether_hnsdt_meets_the_target_and_by_
     from hnsdt.evaluation.report import target_lines
 
     rows = [("hnsdt", "train", 0.0, 0.5, 3.0), ("hnsdt", "heldout", 0.0, 0.99, 1.05), ("hnsdt", "heldout", 0.3, 0.96, 1.08),
-            ("hnsdt", "drawn", 0.0, 1.0, 1.02), ("hnsdt", "drawn", 0.3, 0.90, 1.30), ("gru", "drawn", 0.0, 0.0, None)]
+            ("hnsdt", "drawn", 0.0, 1.0, 1.02), ("hnsdt", "drawn", 0.3, 0.90, 1.30), ("gru", "drawn", 0.0, 0.0, None),
+            ("hnsdt", "minigrid", 0.0, 0.0, None)]
     summ = pd.DataFrame(rows, columns=["method", "split", "fail_prob", "success_mean", "steps_ratio_mean"])
     summ["optimal_success"] = 1.0
     assert target_lines(summ) == [
         "held-out layouts: met — lowest success 0.960 of the optimum's (fail_prob 0.3), most steps 1.08× the "
         "optimum's (fail_prob 0.3)",
         "hand-drawn maps: short — lowest success 0.900 of the optimum's (fail_prob 0.3), most steps 1.30× the "
-        "optimum's (fail_prob 0.3)"]
+        "optimum's (fail_prob 0.3)",
+        "MiniGrid grids: short — lowest success 0.000 of the optimum's (fail_prob 0), no episode reached the exit"]

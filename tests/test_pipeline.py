@@ -178,6 +178,23 @@ def test_replay_points_to_an_evaluated_episode(repo_copy):
     assert "foxglove_layout.json" in opened
 
 
+def test_the_trained_models_run_on_a_folder_of_a_users_maps(tmp_path, repo_copy, first_run):
+    """`hnsdt generalisation evaluate --drawn FOLDER`: the pipeline's trained models on maps a user drew, as the
+    split `drawn` beside the others (the pipeline's outputs untouched)."""
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine/long_corridor.txt").write_text("@.........a\n#########A#\nG..........\n")
+    before = (repo_copy / "generalisation/results/summary.csv").read_bytes()
+    out = subprocess.run([sys.executable, "-m", "hnsdt.cli", "generalisation", "evaluate", "--drawn",
+                          str(tmp_path / "mine"), "--out", str(tmp_path / "results"), "--quiet"],
+                         cwd=repo_copy, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    episodes = pd.read_csv(tmp_path / "results/episodes.csv")
+    drawn = episodes[episodes.split == "drawn"]
+    assert set(drawn.layout) == {str(tmp_path / "mine/long_corridor.txt")}
+    assert set(drawn.method) == set(UNSEEN) | {"symbolic"} and drawn[drawn.method == "symbolic"].success.all()
+    assert (repo_copy / "generalisation/results/summary.csv").read_bytes() == before
+
+
 def _tmp_under(folder: Path) -> bool:
     return folder.is_dir() and any(p.name.startswith(TMP_PREFIX) for p in folder.iterdir())
 

@@ -25,7 +25,7 @@ from hnsdt.methods import METHODS  # noqa: E402
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
 HEADLINE = "<!-- headline:begin -->", "<!-- headline:end -->"
 CASES = {"keydoor": "Case 1 keydoor", "multikeydoor": "Case 2 multikeydoor"}
-SPLITS = {"heldout": "held-out maps", "minigrid": "MiniGrid grids"}
+SPLITS = {"heldout": "held-out maps", "minigrid": "MiniGrid grids", "drawn": "hand-drawn maps"}
 
 
 def _rate(mean: float, std: float) -> str:

@@ -596,10 +596,11 @@ def target_lines(summ: pd.DataFrame, method: str = PROPOSED) -> list[str]:
         share = d.success_mean / d.optimal_success
         worst_share, worst_steps = d.loc[share.idxmin()], d.loc[d.steps_ratio_mean.fillna(np.inf).idxmax()]
         met = share.min() >= TARGET_SUCCESS and worst_steps.steps_ratio_mean <= TARGET_STEPS
+        steps = (f"most steps {worst_steps.steps_ratio_mean:.2f}× the optimum's (fail_prob {worst_steps.fail_prob:g})"
+                 if d.steps_ratio_mean.notna().any() else "no episode reached the exit")
         out.append(f"{SPLIT_LABELS.get(split, split)}: " + ("met" if met else "short") +
                    f" — lowest success {share.min():.3f} of the optimum's (fail_prob {worst_share.fail_prob:g}), "
-                   f"most steps {_fmt(worst_steps.steps_ratio_mean, '.2f')}× the optimum's "
-                   f"(fail_prob {worst_steps.fail_prob:g})")
+                   + steps)
     return out
 
 
