@@ -589,3 +589,18 @@ def test_the_report_says_per_unseen_split_whether_hnsdt_meets_the_target_and_by_
         "hand-drawn maps: short — lowest success 0.900 of the optimum's (fail_prob 0.3), most steps 1.30× the "
         "optimum's (fail_prob 0.3)",
         "MiniGrid grids: short — lowest success 0.000 of the optimum's (fail_prob 0), no episode reached the exit"]
+
+
+def test_the_report_shows_each_hand_drawn_map():
+    import pandas as pd
+
+    from hnsdt.evaluation.report import drawn_lines
+
+    rows = [("hnsdt", "drawn", "layouts/drawn/spiral_9x9.txt", True, 40, 37.0),
+            ("hnsdt", "drawn", "layouts/drawn/spiral_9x9.txt", False, 250, 37.0),
+            ("symbolic", "drawn", "layouts/drawn/spiral_9x9.txt", True, 37, 37.0),
+            ("hnsdt", "heldout", "keydoor-100000", True, 9, 9.0)]
+    episodes = pd.DataFrame(rows, columns=["method", "split", "layout", "success", "steps", "optimal_steps"])
+    lines = drawn_lines(episodes).splitlines()
+    assert len(lines) == 3 and lines[2] == "| `spiral_9x9` | 1.000 | 0.500 | 1.08 |"
+    assert drawn_lines(episodes[episodes.split != "drawn"]) == ""

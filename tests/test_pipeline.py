@@ -121,6 +121,7 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     assert set(unseen.split) == {"train", "heldout", "minigrid", "drawn"}
     assert len(unseen) == (len(UNSEEN) + 1) * (3 + drawn) * 2 * 2  # methods x layouts x fail_probs x episodes
     assert "hand-drawn maps: 6 (5–16 × 9–16 cells)" in report and "against the target on maps it never saw" in report
+    assert "Per hand-drawn map" in report and "| `spiral_9x9` |" in report
     assert "## Unseen layouts" in report and (repo_copy / "report/figures/generalisation.png").is_file()
     assert lock["stages"]["collect_generalisation"]["outs"][0]["md5"] in report
     assert (repo_copy / "report/figures/environments.png").stat().st_size > 10_000

@@ -636,10 +636,29 @@ def generalisation_figure(table: pd.DataFrame, path: Path) -> None:
     plt.close(fig)
 
 
+def drawn_lines(episodes: pd.DataFrame) -> str:
+    """Per hand-drawn map: each method's success (mean over fail_probs, seeds and episodes) and HNSDT's steps /
+    optimum — which shapes a method handles, where the split's mean hides it."""
+    d = episodes[episodes.split == "drawn"]
+    if d.empty:
+        return ""
+    methods = [m for m in _methods(d)]
+    lines = ["| map | " + " | ".join(_label(m) for m in methods) + " | HNSDT steps / opt |",
+             "|---|" + "---|" * (len(methods) + 1)]
+    for layout, m in d.groupby("layout", sort=False):
+        success = m.groupby("method").success.mean()
+        won = m[(m.method == PROPOSED) & m.success]
+        ratio = (won.steps / won.optimal_steps).mean() if len(won) else np.nan
+        lines.append(f"| `{Path(layout).stem}` | " + " | ".join(_fmt(success.get(x)) for x in methods)
+                     + f" | {_fmt(ratio, '.2f')} |")
+    return "\n".join(lines)
+
+
 def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
     """The report's unseen-layout section: the figure, the table and per-fail_prob numbers."""
     summ = pd.read_csv(results / "summary.csv")
     layouts = pd.read_csv(results / "layouts.csv")
+    episodes = pd.read_csv(results / "episodes.csv")
     table = generalisation_table(summ)
     generalisation_figure(table, figure)
     splits = list(dict.fromkeys(table.split))
@@ -671,8 +690,8 @@ def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
             "generalisation_radius": g.view_radius if g else "?",
             "generalisation_splits": [f"{SPLIT_LABELS.get(s, s)}: {n} ({sizes[s]} cells)" for s, n in counts.items()],
             "generalisation_seeds": int(summ.seeds.max()),
-            "generalisation_episodes": int(pd.read_csv(results / "episodes.csv").groupby(
-                ["method", "seed", "layout", "fail_prob"]).size().max())}
+            "generalisation_episodes": int(episodes.groupby(["method", "seed", "layout", "fail_prob"]).size().max()),
+            "generalisation_drawn": drawn_lines(episodes)}
 
 
 HEADLINE_SPLITS = ("heldout", "minigrid", "drawn")  # the unseen-layout splits in the headline (training maps:
