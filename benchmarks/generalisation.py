@@ -26,7 +26,7 @@ pin_process()
 from hnsdt import generalisation as gen  # noqa: E402
 from hnsdt.config import compute_settings, load_params  # noqa: E402
 from hnsdt.params import validate  # noqa: E402
-from hnsdt.evaluation.report import SPLIT_LABELS, generalisation_table  # noqa: E402
+from hnsdt.evaluation.report import SPLIT_LABELS, drawn_lines, generalisation_table  # noqa: E402
 from hnsdt.models.checkpoint import load_checkpoint  # noqa: E402
 from hnsdt.training import train_all  # noqa: E402
 
@@ -90,6 +90,7 @@ def main() -> None:
         gen.evaluate(params, tmp / "models", tmp / "results", compute, progress=False)
         times["evaluate"] = time.perf_counter() - t0
         table = generalisation_table(pd.read_csv(tmp / "results/summary.csv"))
+        per_map = drawn_lines(pd.read_csv(tmp / "results/episodes.csv"))
     print(f"\n{g['family']}: {g['train_layouts']} training layouts ({g['evaluated_train_layouts']} evaluated), "
           f"{g['heldout_layouts']} held-out, MiniGrid {[(m['id'], m['layouts']) for m in g['minigrid']]}; seeds "
           f"{g['seeds']}, {g['episodes']} episodes per layout and fail_prob, budgets {g.get('budgets', {})}\n")
@@ -97,6 +98,8 @@ def main() -> None:
     for r in table.itertuples():
         print(f"| {r.method} | {SPLIT_LABELS.get(r.split, r.split)} | {r.success:.3f} ± {r.success_std:.3f} | "
               f"{r.steps_ratio:.2f} |")
+    if per_map:
+        print("\nper hand-drawn map (success):\n" + per_map)
     if validation:
         print(f"\nvalidation layouts ({g['validation_layouts']}), mean steps to the exit at fail_prob 0 of the "
               "epoch kept: " + "; ".join(validation))
