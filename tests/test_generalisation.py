@@ -192,28 +192,37 @@ def test_the_view_dt_reads_nothing_tied_to_one_map():
     assert not torch.allclose(out[0], moved)
 
 
+def _view_frames(layouts, max_steps: int, fail_probs: list, behaviours: list):
+    """Training frames of view states (radius 2) from episodes collected on each layout (seed = its index)."""
+    from hnsdt.data.collect import CollectConfig, collect_episodes
+    from hnsdt.models.view import view_states
+    from hnsdt.models.windows import frames_from_arrays
+
+    parts, n = [], 0
+    for i, layout in enumerate(layouts):
+        cfg = CollectConfig(env_id="gen", layout=layout, max_steps=max_steps, fail_probs=fail_probs,
+                            behaviours=behaviours, seed=i)
+        for rec in collect_episodes(cfg, progress=False):
+            t = len(rec["actions"])
+            parts.append((view_states(layout, rec["states"][:t], 2), rec["actions"], rec["rewards"],
+                          rec["subgoal_ids"], rec["subgoal_targets"], np.full(t, n), np.arange(t)))
+            n += 1
+    return frames_from_arrays(*(np.concatenate(col) for col in zip(*parts)))
+
+
 def test_hnsdt_with_the_view_dt_trains_on_some_layouts_and_runs_on_others():
     """Smoke run of the generalisation path: frames of view states from two generated layouts, a few gradient
     steps, then HNSDT with that DT on a held-out layout of another size and on a MiniGrid grid."""
     from hnsdt.agents.dt_agents import HNSDTAgent
     from hnsdt.agents.executor import ExecutorConfig
     from hnsdt.agents.rollout import rollout
-    from hnsdt.data.collect import Behaviour, CollectConfig, collect_episodes
-    from hnsdt.models.windows import frames_from_arrays
+    from hnsdt.data.collect import Behaviour
     from hnsdt.envs.minigrid_adapter import from_minigrid
     from hnsdt.models.train import TrainConfig, train_dt
-    from hnsdt.models.view import ViewDecisionTransformer, view_config, view_states
+    from hnsdt.models.view import ViewDecisionTransformer, view_config
 
-    parts, n = [], 0
-    for i, layout in enumerate([generate("keydoor", 0), generate("keydoor", 1)]):
-        cfg = CollectConfig(env_id="gen", layout=layout, max_steps=50, fail_probs=[0.1],
-                            behaviours=[Behaviour("noisy_planner", 4, "random", 0.1)], seed=i)
-        for rec in collect_episodes(cfg, progress=False):
-            t = len(rec["actions"])
-            parts.append((view_states(layout, rec["states"][:t], 2), rec["actions"], rec["rewards"],
-                          rec["subgoal_ids"], rec["subgoal_targets"], np.full(t, n), np.arange(t)))
-            n += 1
-    frames = frames_from_arrays(*(np.concatenate(col) for col in zip(*parts)))
+    frames = _view_frames([generate("keydoor", 0), generate("keydoor", 1)], 50, [0.1],
+                          [Behaviour("noisy_planner", 4, "random", 0.1)])
     cfg = view_config("subgoal", 2, 2, 15, context=4, n_layers=1, n_heads=2, d_model=16, max_timestep=50)
     model, curve = train_dt(frames, cfg, TrainConfig(epochs=1, max_steps=3, batch_size=32), progress=False,
                             network=ViewDecisionTransformer)
@@ -234,22 +243,12 @@ def test_a_view_dt_trained_on_a_handful_of_maps_reaches_its_sub_goals_on_maps_it
     from hnsdt.agents.dt_agents import HNSDTAgent
     from hnsdt.agents.executor import ExecutorConfig
     from hnsdt.agents.rollout import rollout
-    from hnsdt.data.collect import Behaviour, CollectConfig, collect_episodes, random_start_states
+    from hnsdt.data.collect import Behaviour, random_start_states
     from hnsdt.models.train import TrainConfig, train_dt
-    from hnsdt.models.view import ViewDecisionTransformer, view_config, view_states
-    from hnsdt.models.windows import frames_from_arrays
+    from hnsdt.models.view import ViewDecisionTransformer, view_config
 
-    parts, n = [], 0
-    for i in range(8):
-        layout = generate("keydoor", i)
-        cfg = CollectConfig(env_id="gen", layout=layout, max_steps=100, fail_probs=[0.0, 0.2], seed=i,
-                            behaviours=[Behaviour("noisy_planner", 8, start, 0.1) for start in ("layout", "random")])
-        for rec in collect_episodes(cfg, progress=False):
-            t = len(rec["actions"])
-            parts.append((view_states(layout, rec["states"][:t], 2), rec["actions"], rec["rewards"],
-                          rec["subgoal_ids"], rec["subgoal_targets"], np.full(t, n), np.arange(t)))
-            n += 1
-    frames = frames_from_arrays(*(np.concatenate(col) for col in zip(*parts)))
+    frames = _view_frames([generate("keydoor", i) for i in range(8)], 100, [0.0, 0.2],
+                          [Behaviour("noisy_planner", 8, start, 0.1) for start in ("layout", "random")])
     cfg = view_config("subgoal", 2, 2, 7, context=6, n_layers=2, n_heads=2, d_model=32, max_timestep=100,
                       formulation="episode")
 
