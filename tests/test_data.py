@@ -184,24 +184,26 @@ def test_the_card_follows_the_hub_and_lerobot_conventions(small_dataset):
     assert meta["data_md5"] == data_md5(small_dataset) and meta["card"]["license"] == "apache-2.0"
 
 
-def test_push_lists_what_it_would_upload_and_fails_offline_with_one_line(small_dataset, tmp_path):
+def test_push_lists_what_it_would_upload_and_fails_offline_with_one_line(small_dataset, tmp_path, capsys,
+                                                                         monkeypatch):
     import shutil
+
+    from hnsdt.cli import main
 
     root = tmp_path / "ds"
     shutil.copytree(small_dataset, root)
     before = sorted(p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file())
-    cmd = [sys.executable, "-m", "hnsdt.cli", "dataset", "push", "multikeydoor", "--root", str(root), "--repo-id",
-           "someone/multikeydoor"]
-    dry = subprocess.run([*cmd, "--dry-run"], cwd=REPO, capture_output=True, text=True)
-    assert dry.returncode == 0, dry.stderr
-    listed = [line.strip() for line in dry.stdout.splitlines() if line.startswith("  ")]
+    args = ["dataset", "push", "multikeydoor", "--root", str(root), "--repo-id", "someone/multikeydoor"]
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")  # in this process: nothing may reach the Hub
+    assert main([*args, "--dry-run"]) == 0  # (in-process: the listing and the bad id need no fresh import)
+    listed = [line.strip() for line in capsys.readouterr().out.splitlines() if line.startswith("  ")]
     assert listed == before and "README.md" in listed and "meta/info.json" in listed
+    assert main([*args[:-1], "multikeydoor"]) == 2 and "--repo-id must be OWNER/NAME" in capsys.readouterr().err
+    cmd = [sys.executable, "-m", "hnsdt.cli", *args]  # the Hub library reads HF_HUB_OFFLINE when imported
     offline = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, env=dict(os.environ, HF_HUB_OFFLINE="1"))
     lines = offline.stderr.strip().splitlines()
     assert offline.returncode == 2 and lines == ["hnsdt: error: cannot push to the Hugging Face Hub: HF_HUB_OFFLINE "
                                                  "is set"], offline.stderr
-    bad = subprocess.run([*cmd[:-1], "multikeydoor"], cwd=REPO, capture_output=True, text=True)
-    assert bad.returncode == 2 and "--repo-id must be OWNER/NAME" in bad.stderr
     assert sorted(p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file()) == before
 
 
