@@ -193,13 +193,20 @@ def network_configs(params: Params, method: str, seed: int):
         except ValueError as e:
             raise params.error(f"models.{g.family}: {e}") from None
         train_cfg = ts.method_config(method, seed)
-        if method in ts.budget and g.validation_layouts:  # the budget's measure acts on the validation layouts:
+        if _budget_on_validation_layouts(params, method):  # the measure acts on the validation layouts:
             train_cfg = replace(train_cfg, validation=0.0)  # every training episode trains
         elif ts.measure.get(method, ("loss",))[0] != "loss":  # acting from held-out states needs one fixed map:
             train_cfg = replace(train_cfg, validation=0.0, epochs=ts.config.epochs)  # here, train.epochs
         return cfg, _budget(params, method, train_cfg)
     bs = baseline_settings(params, method, env, seed)
     return view_cls(**asdict(bs.model), view_radius=g.view_radius), _budget(params, method, bs.train)
+
+
+def _budget_on_validation_layouts(params: Params, method: str) -> bool:
+    """Does ``method`` (a DT with a ``train.validation`` entry) stop at the plateau of its steps to the exit on
+    the validation layouts (:class:`hnsdt.training.StepsToExit`)?"""
+    return (lookup_method(method).stage == "train" and settings(params).validation_layouts > 0
+            and method in params.train.validation)
 
 
 def _budget(params: Params, method: str, train_cfg):
@@ -244,12 +251,12 @@ def plan_runs(params: Params, method: str, dataset: str | Path) -> list:
         raise ValueError(f"{method} learns from {wanted} episodes and {dataset} holds none; set "
                          "generalisation.random_episodes_per_layout > 0 (random walks) and collect again")
     measure = None
-    ts = train_settings(params) if lookup_method(method).stage == "train" else None
-    if ts is not None and method in ts.budget and g.validation_layouts:
+    if _budget_on_validation_layouts(params, method):
         from hnsdt.training import StepsToExit
 
         measure = StepsToExit.on_layouts([s.layout for s in validation_layouts(params)], g.max_steps,
-                                         ts.measure[method][1], method, method_executor(params, method), facts)
+                                         params.train.validation[method].starts, method,
+                                         method_executor(params, method), facts)
     return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data, facts, measure=measure)
             for seed in g.seeds]
 
@@ -319,8 +326,7 @@ def evaluate(params: Params, models_root: str | Path, out_dir: str | Path, compu
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
     table = pd.DataFrame([row for batches in results for rows in batches for row in rows])
     optimal = {(s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fps}
-    table["optimal_steps"] = [optimal[(n, fp)][0] for n, fp in zip(table["layout"], table["fail_prob"])]
-    table["optimal_success"] = [optimal[(n, fp)][1] for n, fp in zip(table["layout"], table["fail_prob"])]
+    table["optimal_steps"], table["optimal_success"] = zip(*(optimal[key] for key in zip(table.layout, table.fail_prob)))
     with atomic_dir(Path(out_dir)) as tmp:
         tmp.mkdir()
         table.to_csv(tmp / "episodes.csv", index=False, float_format="%.6g")
