@@ -17,6 +17,10 @@ pin_environment()
 os.environ["OMP_NUM_THREADS"] = "1"
 os.environ["OMP_WAIT_POLICY"] = "PASSIVE"
 
+import contextlib  # noqa: E402
+import io  # noqa: E402
+import subprocess  # noqa: E402
+
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
@@ -45,3 +49,19 @@ def multikeydoor():
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)
+
+
+def hnsdt_cli(*args, cwd=REPO) -> subprocess.CompletedProcess:
+    """``hnsdt ARGS`` run in this process from ``cwd`` (``hnsdt.cli.main``, the command's whole body but the
+    ``sys.exit``), its exit status and output as a subprocess's would be. A fresh process pays seconds to import
+    torch and lerobot; test_cli.py keeps real subprocesses for the entry point itself."""
+    from hnsdt.cli import main
+
+    argv = [str(a) for a in args]
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.chdir(cwd), contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            code = main(argv)
+        except SystemExit as e:  # argparse's usage errors and --help
+            code = e.code if isinstance(e.code, int) else 2
+    return subprocess.CompletedProcess(["hnsdt", *argv], code, out.getvalue(), err.getvalue())

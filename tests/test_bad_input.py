@@ -5,21 +5,15 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 import yaml
 
 from conftest import REPO
+from conftest import hnsdt_cli as hnsdt  # in-process; test_cli.py runs the command as a fresh process
 
 PARAMS = yaml.safe_load(Path(REPO, "params.yaml").read_text())
-
-
-def hnsdt(*args, cwd):
-    return subprocess.run([sys.executable, "-m", "hnsdt.cli", *map(str, args)], cwd=cwd, capture_output=True,
-                          text=True)
 
 
 def assert_one_error_line(out, match: str) -> None:

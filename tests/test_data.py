@@ -9,7 +9,7 @@ import pytest
 import yaml
 from lerobot.datasets.lerobot_dataset import LeRobotDataset
 
-from conftest import REPO
+from conftest import REPO, hnsdt_cli
 from hnsdt.data.collect import Behaviour, CollectConfig, collect_dataset, random_start_states
 from hnsdt.data.lerobot_io import DatasetError, check_dataset, episode_table, open_dataset
 from hnsdt.data.segmentation import hindsight_labels, segments_of
@@ -131,8 +131,8 @@ def test_same_seed_same_files(tmp_path):
     outs = []
     for run in ("a", "b"):
         out = tmp_path / run
-        subprocess.run([sys.executable, "-m", "hnsdt.cli", "--params", str(params), "collect", "--env", "keydoor",
-                        "--out", str(out), "--quiet"], check=True, cwd=REPO, capture_output=True)
+        done = hnsdt_cli("--params", params, "collect", "--env", "keydoor", "--out", out, "--quiet")
+        assert done.returncode == 0, done.stderr
         outs.append(out)
     files = sorted(p.relative_to(outs[0]) for p in outs[0].rglob("*") if p.is_file())
     assert files and files == sorted(p.relative_to(outs[1]) for p in outs[1].rglob("*") if p.is_file())

@@ -7,7 +7,7 @@ import numpy as np
 from mcap.reader import make_reader
 from rerun.chunk import RrdReader
 
-from conftest import REPO
+from conftest import hnsdt_cli
 from hnsdt.agents import SymbolicAgent, rollout
 from hnsdt.envs import KeyDoorVectorEnv
 from hnsdt.logs import record_from_episode, write_mcap, write_rrd
@@ -102,11 +102,9 @@ def test_replay_renders_a_dataset_episode(tmp_path, keydoor):
 
     cfg = CollectConfig("hnsdt/KeyDoor-v0", keydoor, 40, [0.1], [Behaviour("noisy_planner", 2, "layout", 0.1)])
     root = collect_dataset(cfg, tmp_path / "ds", "local/ds", progress=False)
-    out = subprocess.run([sys.executable, "-m", "hnsdt.cli", "replay", "--dataset", str(root), "--episode", "1",
-                          "--out", str(tmp_path / "ep1.rrd")], cwd=REPO, capture_output=True, text=True)
+    out = hnsdt_cli("replay", "--dataset", root, "--episode", "1", "--out", tmp_path / "ep1.rrd")
     assert out.returncode == 0, out.stderr
     assert "GoTo(key a) -> PickKey(a)" in out.stdout
     assert _rows(tmp_path / "ep1.rrd")["/grid"] > 0 and (tmp_path / "ep1.mcap").is_file()
-    bad = subprocess.run([sys.executable, "-m", "hnsdt.cli", "replay", "--dataset", str(root), "--episode", "9"],
-                         cwd=REPO, capture_output=True, text=True)
+    bad = hnsdt_cli("replay", "--dataset", root, "--episode", "9")
     assert bad.returncode == 2 and "has episodes 0..1" in bad.stderr
