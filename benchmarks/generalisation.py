@@ -30,7 +30,8 @@ from hnsdt.evaluation.report import SPLIT_LABELS, drawn_lines, generalisation_ta
 from hnsdt.models.checkpoint import load_checkpoint  # noqa: E402
 from hnsdt.training import train_all  # noqa: E402
 
-MAX_STEPS = {"keydoor": 100, "multikeydoor": 250, "keydoor_obstacles": 150, "keydoor_maze": 150}
+MAX_STEPS = {"keydoor": 100, "multikeydoor": 250, "keydoor_obstacles": 150, "keydoor_maze": 150,
+             "keydoor_mixed": 150}
 
 
 def main() -> None:

@@ -186,7 +186,7 @@ def network_configs(params: Params, method: str, seed: int):
             raise params.error(f"missing key models.{g.family} (the decision transformers' size on the "
                                f"generalisation family {g.family})")
         try:
-            cfg = view_config(entry.condition, lay.n_flags, g.view_radius, g.max_offset,
+            cfg = view_config(entry.condition, lay.n_flags, g.view_radius, g.max_offset, g.conv_layers,
                               max_timestep=g.max_steps, dropout=params.train.dropout,
                               formulation=ts.formulation[method],
                               **models[g.family].model_dump())

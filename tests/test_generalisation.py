@@ -71,6 +71,17 @@ def test_the_families_with_walls_inside_keep_case_1s_structure_and_make_the_agen
     assert share["keydoor"] == 0 and share[family] > {"keydoor_obstacles": 0.01, "keydoor_maze": 0.1}[family]
 
 
+def test_a_mixed_family_takes_each_seed_from_one_of_its_parts():
+    """``keydoor_mixed``: the open-room ``keydoor`` layout at even seeds, the ``keydoor_maze`` one at odd seeds —
+    every split of it (training, validation, held-out) holds both shapes."""
+    for seed in (0, 1, 100000, 100001, 200002, 200003):
+        part = "keydoor" if seed % 2 == 0 else "keydoor_maze"
+        assert generate("keydoor_mixed", seed).text == generate(part, seed).text
+        assert generate("keydoor_mixed", seed).name == f"{part}-{seed}"
+    with pytest.raises(LayoutError, match="takes its parts' sizes"):
+        generate("keydoor_mixed", 0, FamilySizes(rows=(7, 9), cols=(7, 9)))
+
+
 def test_impossible_sizes_stop_with_one_line():
     with pytest.raises(LayoutError, match="at least 8"):
         generate("multikeydoor", 0, FamilySizes(rows=(5, 6), cols=(4, 6)))
@@ -190,6 +201,33 @@ def test_the_view_dt_reads_nothing_tied_to_one_map():
         moved = model(torch.from_numpy(np.concatenate([pos_a, codes, flags], axis=-1)), **window,
                       subgoal_targets=torch.from_numpy(pos_a[:, -1] + [0, 3]))
     assert not torch.allclose(out[0], moved)
+
+
+def test_the_convolutional_view_encoder_reads_a_pattern_alike_wherever_it_sits():
+    """``generalisation.conv_layers``: 3 x 3 convolutions over the view's cell embeddings. A wall pattern moved
+    inside the view moves its features with it (away from the view's edge); without convolutions the encoder is
+    the flattened embeddings' projection, parameter for parameter."""
+    import torch
+
+    from hnsdt.models.view import ViewEncoder
+
+    torch.manual_seed(0)
+    enc = ViewEncoder(radius=4, code_dim=4, n_flags=1, width=8, conv_layers=2, conv_channels=6)
+    side, floor, wall = 9, 1, 0
+    views = torch.full((2, side, side), floor)
+    for i, at in enumerate((2, 4)):  # an L of walls, and the same L two cells down and right
+        views[i, at:at + 2, at] = wall
+        views[i, at + 1, at + 1] = wall
+    codes = views.reshape(2, -1)
+    grid = enc.code_emb(codes).reshape(2, side, side, -1).permute(0, 3, 1, 2)
+    with torch.no_grad():
+        feats = enc.convs(grid)
+    # where both outputs' 5 x 5 receptive fields lie inside the view, the features are the same, shifted
+    assert torch.allclose(feats[0, :, 2:5, 2:5], feats[1, :, 4:7, 4:7], atol=1e-6)
+    states = torch.cat([torch.zeros(2, 2, dtype=torch.long), codes, torch.ones(2, 1, dtype=torch.long)], dim=1)
+    assert enc(states).shape == (2, 8) and not torch.allclose(enc(states)[0], enc(states)[1])
+    plain = ViewEncoder(radius=4, code_dim=4, n_flags=1, width=8)
+    assert not hasattr(plain, "convs") and plain.view_proj.in_features == side * side * 4
 
 
 def _view_frames(layouts, max_steps: int, fail_probs: list, behaviours: list):
@@ -429,7 +467,7 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
 def test_a_bad_generalisation_knob_is_one_line_naming_it(tmp_path):
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"]["family"] = "maze"
-    with pytest.raises(ValueError, match=r"^params: generalisation.family: Input should be 'keydoor', .*'keydoor_maze', got 'maze'"):
+    with pytest.raises(ValueError, match=r"^params: generalisation.family: Input should be 'keydoor', .*'keydoor_mixed', got 'maze'"):
         validate(params)
     params["generalisation"].update(family="keydoor", methods=["hnsdt", "hnsdt"])
     with pytest.raises(ValueError, match="generalisation.methods: must not repeat"):

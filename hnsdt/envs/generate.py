@@ -12,6 +12,8 @@ keep the family's structure):
 * ``keydoor_maze`` — ``keydoor`` whose two rooms are braided mazes (a random depth-first maze on every other
   cell, then a third of its inner walls removed so that there are loops), the door between two corridors: the
   random-maze training maps of value-iteration and gated path-planning networks, with Case 1's key and door.
+* ``keydoor_mixed`` — both single-door shapes in every split: ``keydoor`` at even seeds, ``keydoor_maze`` at
+  odd ones (each layout is that family's layout of the same seed, and keeps its name).
 * ``multikeydoor`` — Case 2's structure: two parallel walls make three rooms in a chain, doors ``A`` and ``B``
   in them; the start and key ``a`` in the first room, key ``b`` and item ``1`` behind door ``A``, item ``2``
   and the exit behind door ``B`` (the keys of later doors sit behind earlier doors).
@@ -31,7 +33,8 @@ import numpy as np
 
 from hnsdt.envs.layout import Layout, LayoutError, parse_layout
 
-FAMILIES = ("keydoor", "multikeydoor", "keydoor_obstacles", "keydoor_maze")
+FAMILIES = ("keydoor", "multikeydoor", "keydoor_obstacles", "keydoor_maze", "keydoor_mixed")
+MIXED = {"keydoor_mixed": ("keydoor", "keydoor_maze")}  # a family drawn from others, by seed (seed % len)
 
 
 @dataclass(frozen=True)
@@ -66,7 +69,12 @@ def check_sizes(family: str, sizes: FamilySizes) -> None:
 
 
 def generate(family: str, seed: int, sizes: FamilySizes | None = None) -> Layout:
-    """The layout of ``family`` for ``seed``; named ``<family>-<seed>``."""
+    """The layout of ``family`` for ``seed``; named ``<family>-<seed>`` (a mixed family's: its part's name)."""
+    if family in MIXED:
+        if sizes is not None:
+            raise LayoutError(f"family {family} takes its parts' sizes; got {sizes}")
+        parts = MIXED[family]
+        return generate(parts[int(seed) % len(parts)], seed)
     sizes = sizes or DEFAULT_SIZES.get(family)
     check_sizes(family, sizes)  # (an unknown family stops here first)
     rng = np.random.default_rng([FAMILIES.index(family), int(seed), 7919])

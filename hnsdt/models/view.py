@@ -37,21 +37,33 @@ def split_states(states: torch.Tensor, radius: int) -> tuple[torch.Tensor, torch
 
 
 class ViewEncoder(nn.Module):
-    """A learned embedding of each cell's code, the window's embeddings flattened and projected, plus a linear
-    map of the flags: one ``width``-vector per state."""
+    """A learned embedding of each cell's code, then (``conv_layers`` > 0) 3 × 3 convolutions over the view —
+    features computed the same way wherever they sit, so a wall next to a corridor reads alike in any corner of
+    the view — the result flattened and projected, plus a linear map of the flags: one ``width``-vector per
+    state."""
 
-    def __init__(self, radius: int, code_dim: int, n_flags: int, width: int):
+    def __init__(self, radius: int, code_dim: int, n_flags: int, width: int, conv_layers: int = 0,
+                 conv_channels: int = 32):
         super().__init__()
         self.radius = radius
         self.code_emb = nn.Embedding(N_CODES, code_dim)
-        self.view_proj = nn.Linear((2 * radius + 1) ** 2 * code_dim, width)
+        if conv_layers:
+            widths = [code_dim] + [conv_channels] * conv_layers
+            self.convs = nn.Sequential(*(layer for a, b in zip(widths, widths[1:])
+                                         for layer in (nn.Conv2d(a, b, 3, padding=1), nn.ReLU())))
+        self.view_proj = nn.Linear((2 * radius + 1) ** 2 * (conv_channels if conv_layers else code_dim), width)
         self.flag_proj = nn.Linear(max(n_flags, 1), width, bias=False)
 
     def forward(self, states: torch.Tensor) -> torch.Tensor:
         codes, flags = split_states(states, self.radius)
         if flags.shape[-1] == 0:
             flags = torch.zeros(*flags.shape[:-1], 1, device=flags.device)
-        return self.view_proj(self.code_emb(codes).flatten(-2)) + self.flag_proj(flags)
+        cells = self.code_emb(codes)  # (..., cells, code_dim)
+        if hasattr(self, "convs"):
+            side = 2 * self.radius + 1
+            grid = cells.reshape(-1, side, side, cells.shape[-1]).permute(0, 3, 1, 2)
+            cells = self.convs(grid).permute(0, 2, 3, 1).reshape(*codes.shape, -1)
+        return self.view_proj(cells.flatten(-2)) + self.flag_proj(flags)
 
 
 class ViewModel:
@@ -73,16 +85,19 @@ class ViewDTConfig(DTConfig):
 
     view_radius: int = 2
     code_dim: int = 16  # embedding width of one cell code
+    conv_layers: int = 0  # 3x3 convolutions over the view before its projection (0: the embeddings flattened)
+    conv_channels: int = 32  # their width
 
     @property
     def max_offset(self) -> int:
         return (self.grid_h - 1) // 2
 
 
-def view_config(condition: str, n_flags: int, view_radius: int, max_offset: int, **sizes) -> ViewDTConfig:
+def view_config(condition: str, n_flags: int, view_radius: int, max_offset: int, conv_layers: int = 0,
+                **sizes) -> ViewDTConfig:
     side = 2 * max_offset + 1
     return ViewDTConfig(condition=condition, n_flags=n_flags, grid_h=side, grid_w=side, view_radius=view_radius,
-                        **sizes)
+                        conv_layers=conv_layers, **sizes)
 
 
 class ViewDecisionTransformer(ViewModel, DecisionTransformer, arch="view_decision_transformer",
@@ -90,7 +105,8 @@ class ViewDecisionTransformer(ViewModel, DecisionTransformer, arch="view_decisio
     def __init__(self, cfg: ViewDTConfig):
         super().__init__(cfg)
         del self.row_emb, self.col_emb, self.flag_proj  # absolute positions are never read
-        self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, cfg.d_model)
+        self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, cfg.d_model, cfg.conv_layers,
+                                cfg.conv_channels)
 
     def embed_states(self, states: torch.Tensor) -> torch.Tensor:
         return self.view(states)
