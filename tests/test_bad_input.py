@@ -90,6 +90,8 @@ PARAM_CASES = {
     "unknown executor mode": ({"planner.mode": "astar"}, COLLECT, "planner.mode: Input should be 'bfs' or 'cost'"),
     "unknown operator set": ({"planner.operators": "teleport"}, COLLECT, "planner.operators: Input should be"),
     "negative render size": ({"collect.render": -4}, COLLECT, "collect.render: Input should be greater than or equal to 0"),
+    "render too narrow for the video encoder": ({"collect.render": 4}, COLLECT,
+                                                "collect.render: 4 pixels per cell draw layout"),
     "unknown paper-arm operators": ({"planner.paper.operators": "jump"}, EVALUATE,
                                     "planner.paper.operators: Input should be"),
     "unknown arm": ({"planner.papr": {"mode": "bfs"}}, COLLECT, "unknown key planner.papr"),

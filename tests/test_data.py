@@ -59,9 +59,10 @@ def test_round_trip_through_stock_lerobot(small_dataset, multikeydoor):
     else:  # a random start: a free cell that is not the exit, flags drawn at random (0/1)
         assert tuple(first[:2]) in {tuple(c) for c in multikeydoor.free_cells()} - {multikeydoor.goal}
         assert set(first[2:]) <= {0, 1}
-    from hnsdt.data.lerobot_io import FEATURE_DTYPES, dataset_features
+    from hnsdt.data.features import REQUIRED_DTYPES
+    from hnsdt.data.lerobot_io import dataset_features
 
-    assert {k: v["dtype"] for k, v in dataset_features(multikeydoor).items() if k in FEATURE_DTYPES} == FEATURE_DTYPES
+    assert {k: v["dtype"] for k, v in dataset_features(multikeydoor).items() if k in REQUIRED_DTYPES} == REQUIRED_DTYPES
     assert frame["task"] in json.loads((small_dataset / "meta/hnsdt.json").read_text())["subgoal_vocabulary"]
     # Frames are the collected transitions: each next state follows from the dynamics, tasks match sub-goal ids.
     vocab = json.loads((small_dataset / "meta/hnsdt.json").read_text())["subgoal_vocabulary"]
@@ -166,7 +167,8 @@ def test_corrupt_or_missing_datasets_fail_clearly(small_dataset, tmp_path):
 def test_the_card_follows_the_hub_and_lerobot_conventions(small_dataset):
     from huggingface_hub import DatasetCard
 
-    from hnsdt.data.card import BIBTEX, FEATURES, data_md5
+    from hnsdt.data.card import BIBTEX, data_md5
+    from hnsdt.data.features import FEATURES
 
     text = (small_dataset / "README.md").read_text()
     card = DatasetCard(text)
@@ -175,7 +177,7 @@ def test_the_card_follows_the_hub_and_lerobot_conventions(small_dataset):
     pattern = card.data.configs[0]["data_files"]
     assert list(small_dataset.glob(pattern)), f"the card's data_files {pattern} match no file"
     info = json.loads((small_dataset / "meta/info.json").read_text())
-    documented = {name for name, _ in FEATURES}
+    documented = {f.name for f in FEATURES}
     assert set(info["features"]) - {"timestamp", "frame_index", "episode_index", "index", "task_index"} <= documented
     assert all(f"| `{name}` |" in text for name in documented & (set(info["features"]) | {"task"}))
     assert "| `observation.image` |" not in text  # not rendered: not described

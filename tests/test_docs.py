@@ -58,3 +58,10 @@ def test_the_link_check_can_fail(tmp_path):
     page.write_text("# Title\n[anchor](page.md#nope)\n")
     with pytest.raises(AssertionError, match="no such heading"):
         test_every_relative_link_resolves(page)
+
+
+def test_the_datasets_page_lists_every_feature_a_dataset_can_have():
+    from hnsdt.data.features import FEATURES
+
+    table = "\n".join(line for line in (REPO / "docs/datasets.md").read_text().splitlines() if line.startswith("| `"))
+    assert [f.name for f in FEATURES if f"`{f.name}`" not in table] == []

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hnsdt.envs.keydoor import GOAL_REWARD, STEP_REWARD
+from hnsdt.data.features import card_rows
 from hnsdt.symbolic.subgoals import ID_TO_NAME
 
 BIBTEX = """@inproceedings{baheri2025hnsdt,
@@ -25,28 +25,6 @@ BIBTEX = """@inproceedings{baheri2025hnsdt,
   booktitle = {Neural-Symbolic Learning and Reasoning (NeSy)},
   year      = {2025}
 }"""
-FEATURES = [  # (feature, meaning); dtypes and shapes come from meta/info.json on the card
-    ("observation.state", "row, column, then one 0/1 flag per key held, door open, item held (names in info.json)"),
-    ("action", "0 up, 1 right, 2 down, 3 left, 4 pick / open"),
-    ("next.reward", f"reward of this step: {STEP_REWARD:g} per step, {GOAL_REWARD:+g} more on the step that reaches "
-                    "the exit holding every item"),
-    ("next.done", "the episode ended with this step (success or time limit)"),
-    ("next.success", "this step reached the exit holding every item"),
-    ("subgoal", "ψ id of the operator the frame serves: the planner's GoTo / Pick / Open operators, or hindsight "
-                "labels of the same for random walks (0 = none)"),
-    ("subgoal.target", "that operator's target cell (-1, -1 for none)"),
-    ("move_subgoal", "the paper's labelling (Appendix B), in hindsight: Move / PickKey / OpenDoor / PickItem"),
-    ("move_subgoal.target", "that operator's target cell (a Move's destination)"),
-    ("task", "the `subgoal`'s name, e.g. `GoTo(key a)`"),
-    ("observation.image", "the grid drawn at this step (walls, keys, doors open or closed, items, exit, the agent "
-                          "as a disc), as video; only with `collect.render` > 0"),
-    ("observation.view", "the (2r+1)×(2r+1) cells around the agent, row-major, as codes: 0 outside the map, 1 wall, "
-                         "2 floor, 3 exit, 5+k key k (a = 0), 15+k closed door, 25+k open door, 35+k item k "
-                         "(`hnsdt.envs.observation`); the centre shows what lies under the agent, a key or item "
-                         "the agent holds is no longer drawn"),
-    ("layout_index", "which of the dataset's layouts the episode was played on (`layout_texts` in meta/hnsdt.json)"),
-]
-VIEW_FEATURES = ("observation.view", "layout_index")
 
 
 def description(cfg, episodes: list[dict], provenance: dict, layouts=None) -> str:
@@ -72,8 +50,7 @@ def description(cfg, episodes: list[dict], provenance: dict, layouts=None) -> st
         f"- fail_probs: {', '.join(f'{f:g}' for f in cfg.fail_probs)}",
         "- load offline: `LeRobotDataset(repo_id, root=<this folder>)`", "",
         "### Features", "", "| feature | meaning |", "|---|---|",
-        *[f"| `{name}` | {meaning} |" for name, meaning in FEATURES
-          if (name != "observation.image" or cfg.render) and (name not in VIEW_FEATURES or layouts)], "",
+        *[f"| `{name}` | {meaning} |" for name, meaning in card_rows(image=bool(cfg.render), view=bool(layouts))], "",
         "### Behaviours and their success rate", "",
         "`random`: uniform random actions (the paper's exploration); `noisy_planner`: the symbolic planner's "
         "shortest-path controllers with each action replaced by a random one with probability epsilon. "

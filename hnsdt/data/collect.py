@@ -132,9 +132,18 @@ def _episode_record(cfg: CollectConfig, b: Behaviour, fail_prob: float, seed: in
     }
 
 
+MIN_VIDEO_WIDTH = 25  # pixels: SVT-AV1, LeRobot's video encoder, dies (SIGFPE) on narrower frames (measured)
+
+
 def collect_dataset(cfg: CollectConfig, root: str | Path, repo_id: str, progress: bool = True,
                     provenance: dict | None = None) -> Path:
     """Collect and write the dataset, its card citing ``provenance`` (git revision, params digest)."""
+    width = cfg.layout.shape[1] * cfg.render
+    if cfg.render and width < MIN_VIDEO_WIDTH:
+        raise ValueError(f"collect.render: {cfg.render} pixels per cell draw layout {cfg.layout.name}'s "
+                         f"{cfg.layout.shape[1]} columns {width} pixels wide; LeRobot's AV1 video encoder crashes on "
+                         f"frames narrower than {MIN_VIDEO_WIDTH} (set collect.render to at least "
+                         f"{-(-MIN_VIDEO_WIDTH // cfg.layout.shape[1])})")
     episodes = collect_episodes(cfg, progress)
     if not episodes:
         raise ValueError("collect: no episodes requested (every behaviour has episodes: 0)")

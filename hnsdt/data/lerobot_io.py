@@ -1,26 +1,9 @@
 """Our trajectories as LeRobot v3.0 datasets: the on-disk format, written and read with the real ``lerobot``.
 
-Per frame (one environment step):
-
-==================  =========  ======  ==================================================================
-feature             dtype      shape   meaning
-==================  =========  ======  ==================================================================
-observation.state   int64      (d,)    row, col, key/door/item flags (names in ``info.json``)
-action              int64      (1,)    0 up, 1 right, 2 down, 3 left, 4 pick/open
-next.reward         float32    (1,)    reward of this step
-next.done           bool       (1,)    the episode ended with this step (success or time limit)
-next.success        bool       (1,)    this step reached the goal holding every item
-subgoal             int64      (1,)    ψ id of the operator being pursued (0 = none), see meta/hnsdt.json
-subgoal.target      int64      (2,)    that operator's target cell (-1, -1 for none)
-move_subgoal        int64      (1,)    the paper's labelling: ψ id of the Move / PickKey / OpenDoor / PickItem
-                                       operator the frame serves, in hindsight (0 = none)
-move_subgoal.target int64      (2,)    that operator's target cell (a Move's destination)
-task                string             the sub-goal's readable name, e.g. ``GoTo(key a)``
-observation.image   video      (H,W,3) optional (``collect.render`` > 0): the grid as drawn by render_rgb
-observation.view    int64      (c,)    datasets over many layouts (``generalisation``): the (2r+1)² cells
-                                       around the agent, row-major, as codes of :mod:`hnsdt.envs.observation`
-layout_index        int64      (1,)    ... and which of the dataset's layouts the episode was played on
-==================  =========  ======  ==================================================================
+Per frame (one environment step): the features of :mod:`hnsdt.data.features`, where each is defined once
+(dtype, element names, meaning, value): the state, the action, the reward, done and success flags, both
+sub-goal labellings with their targets and the task; the grid as video with ``collect.render`` > 0; the local
+view and the layout index on datasets over many layouts.
 
 Beside LeRobot's own files, ``meta/hnsdt.json`` records the environment (id, layout text, limits), the sub-goal
 vocabulary and the collection settings, ``meta/hnsdt_episodes.parquet`` one row per episode (env id, layout,
@@ -51,6 +34,7 @@ from lerobot.datasets import dataset_writer as _lerobot_writer  # noqa: E402
 from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
 
 from hnsdt.data.card import data_md5, render_card  # noqa: E402
+from hnsdt.data.features import REQUIRED_DTYPES, frame, info_features  # noqa: E402
 from hnsdt.envs.layout import Layout  # noqa: E402
 from hnsdt.envs.observation import local_view  # noqa: E402
 from hnsdt.envs.render import render_rgb  # noqa: E402
@@ -66,27 +50,11 @@ class DatasetError(RuntimeError):
 
 
 def dataset_features(layout: Layout, render_px: int = 0, view_radius: int = 0) -> dict:
-    """The per-frame features; ``render_px`` > 0 adds the grid drawn at that many pixels per cell, stored as
-    video (what LeRobot's visualizers, the Hub's included, show); ``view_radius`` > 0 (datasets over many
-    layouts) adds the local view and the layout index."""
-    r = view_radius
-    view = {"observation.view": {"dtype": "int64", "shape": ((2 * r + 1) ** 2,),
-                                 "names": [f"cell{dr:+d}{dc:+d}" for dr in range(-r, r + 1) for dc in range(-r, r + 1)]},
-            "layout_index": {"dtype": "int64", "shape": (1,), "names": ["layout"]}} if r else {}
-    image = {"observation.image": {"dtype": "video", "shape": (layout.shape[0] * render_px,
-                                                               layout.shape[1] * render_px, 3),
-                                   "names": ["height", "width", "channels"]}} if render_px else {}
-    return image | {
-        "observation.state": {"dtype": "int64", "shape": (layout.state_size,), "names": layout.state_names},
-        "action": {"dtype": "int64", "shape": (1,), "names": ["action"]},
-        "next.reward": {"dtype": "float32", "shape": (1,), "names": ["reward"]},
-        "next.done": {"dtype": "bool", "shape": (1,), "names": ["done"]},
-        "next.success": {"dtype": "bool", "shape": (1,), "names": ["success"]},
-        "subgoal": {"dtype": "int64", "shape": (1,), "names": ["subgoal_id"]},
-        "subgoal.target": {"dtype": "int64", "shape": (2,), "names": ["row", "col"]},
-        "move_subgoal": {"dtype": "int64", "shape": (1,), "names": ["subgoal_id"]},
-        "move_subgoal.target": {"dtype": "int64", "shape": (2,), "names": ["row", "col"]},
-    } | view
+    """The per-frame features of a dataset on ``layout`` (:mod:`hnsdt.data.features`); ``render_px`` > 0 adds
+    the grid drawn at that many pixels per cell, stored as video (what LeRobot's visualizers, the Hub's
+    included, show); ``view_radius`` > 0 (datasets over many layouts) adds the local view and the layout index."""
+    image = (layout.shape[0] * render_px, layout.shape[1] * render_px, 3) if render_px else None
+    return info_features(layout.state_names, image, view_radius)
 
 
 @contextlib.contextmanager
@@ -131,7 +99,7 @@ def write_dataset(root: str | Path, repo_id: str, layout: Layout | list[Layout],
             ds.meta.save_episode_tasks([ID_TO_NAME[i] for i in used])
             with _skip_image_embedding(features):
                 for ep in tqdm(episodes, desc=f"write {root.name}", unit="episode", disable=not progress):
-                    _add_episode(ds, ep, ID_TO_NAME, draw, view)
+                    _add_episode(ds, ep, features, draw, view)
                     ds.save_episode()
         finally:
             ds.finalize()
@@ -161,28 +129,15 @@ def _quiet_video_encoder():
         av.logging.set_level(level)
 
 
-def _add_episode(ds: LeRobotDataset, ep: dict, names: list[str], draw=None, view=None) -> None:
-    states, actions, rewards = ep["states"], ep["actions"], ep["rewards"]
-    T = len(actions)
-    views = view(ep) if view is not None else None
-    for t in range(T):
-        last = t == T - 1
-        success = last and ep["success"]
-        image = {"observation.image": draw(states[t])} if draw is not None else {}
-        if views is not None:
-            image |= {"observation.view": views[t], "layout_index": np.array([ep["layout_index"]], dtype=np.int64)}
-        ds.add_frame(image | {
-            "observation.state": states[t].astype(np.int64),
-            "action": np.array([actions[t]], dtype=np.int64),
-            "next.reward": np.array([rewards[t]], dtype=np.float32),
-            "next.done": np.array([last], dtype=bool),
-            "next.success": np.array([success], dtype=bool),
-            "subgoal": np.array([ep["subgoal_ids"][t]], dtype=np.int64),
-            "subgoal.target": ep["subgoal_targets"][t].astype(np.int64),
-            "move_subgoal": np.array([ep["move_subgoal_ids"][t]], dtype=np.int64),
-            "move_subgoal.target": ep["move_subgoal_targets"][t].astype(np.int64),
-            "task": names[int(ep["subgoal_ids"][t])],
-        })
+def _add_episode(ds: LeRobotDataset, ep: dict, features: dict, draw=None, view=None) -> None:
+    extra = {}
+    if draw is not None:
+        extra["images"] = [draw(state) for state in ep["states"][:len(ep["actions"])]]
+    if view is not None:
+        extra["views"] = view(ep)
+    ep = dict(ep, **extra)
+    for t in range(len(ep["actions"])):
+        ds.add_frame(frame(ep, t, features))
 
 
 def check_dataset(root: str | Path) -> dict:
@@ -201,10 +156,10 @@ def check_dataset(root: str | Path) -> dict:
     if info.get("codebase_version") != "v3.0":
         raise DatasetError(f"dataset {root}: LeRobot format {info.get('codebase_version')}, expected v3.0")
     features = info.get("features", {})
-    missing = set(FEATURE_DTYPES) - set(features)
+    missing = set(REQUIRED_DTYPES) - set(features)
     if missing:
         raise DatasetError(f"dataset {root}: features {sorted(missing)} are missing from meta/info.json")
-    for name, dtype in FEATURE_DTYPES.items():
+    for name, dtype in REQUIRED_DTYPES.items():
         if features[name].get("dtype") != dtype:
             raise DatasetError(f"dataset {root}: feature {name!r} has dtype {features[name].get('dtype')}, "
                                f"expected {dtype} (meta/info.json)")
@@ -212,11 +167,6 @@ def check_dataset(root: str | Path) -> dict:
         raise DatasetError(f"dataset {root}: no episodes (meta/info.json total_episodes = "
                            f"{info.get('total_episodes')!r})")
     return meta
-
-
-FEATURE_DTYPES = {"observation.state": "int64", "action": "int64", "next.reward": "float32", "next.done": "bool",
-                  "next.success": "bool", "subgoal": "int64", "subgoal.target": "int64", "move_subgoal": "int64",
-                  "move_subgoal.target": "int64"}  # as written above
 
 
 def open_dataset(root: str | Path, delta_timestamps: dict | None = None, repo_id: str | None = None
