@@ -235,7 +235,7 @@ def plan_runs(params: Params, method: str, dataset: str | Path) -> list:
         data = ([s.layout for s in training_layouts(params)], g.max_steps)
         facts = {"family": g.family, "train_layouts": g.train_layouts}
     else:
-        from hnsdt.data.lerobot_io import check_dataset
+        from hnsdt.data.format import check_dataset
 
         radius = check_dataset(dataset).get("view_radius", 0)
         if radius != g.view_radius:

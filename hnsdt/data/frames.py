@@ -1,5 +1,6 @@
-"""A collected LeRobot dataset's frames, read once through stock ``LeRobotDataset`` (its Arrow table, as numpy)
-into the :class:`~hnsdt.models.windows.Frames` the offline learners train on."""
+"""A collected LeRobot dataset's frames, read once (the Arrow table stock ``LeRobotDataset`` loads, as numpy:
+:func:`hnsdt.data.format.frame_columns`) into the :class:`~hnsdt.models.windows.Frames` the offline learners
+train on."""
 
 from __future__ import annotations
 
@@ -14,16 +15,16 @@ def load_frames(root: str | Path, operators: str = "goto") -> Frames:
     """The dataset's frames, with the sub-goal labelling of the operator set ``operators``: ``goto`` reads
     ``subgoal`` (the planner's operators, or hindsight GoTo labels), ``move`` the paper's ``move_subgoal``.
     A dataset with views (over many layouts) gives view states: row, col, view codes, flags."""
-    from hnsdt.data.lerobot_io import episode_table, open_dataset
+    from hnsdt.data.format import check_dataset, episode_table, frame_columns
 
     column = {"goto": "subgoal", "move": "move_subgoal"}[operators]
-    ds = open_dataset(root)
-    cols = ds.hf_dataset.with_format("numpy")[:]
+    view = ["observation.view"] if check_dataset(root).get("view_radius") else []
+    cols = frame_columns(root, ["observation.state", "action", "next.reward", column, f"{column}.target",
+                                "episode_index", "frame_index", *view])
     policies = episode_table(root).set_index("episode_index")["policy"]
-    states = np.stack(cols["observation.state"])
-    if "observation.view" in cols:  # a dataset over many layouts: view states (hnsdt.models.view.view_states)
-        states = np.concatenate([states[:, :2], np.stack(cols["observation.view"]), states[:, 2:]], axis=1)
-    return frames_from_arrays(states, np.ravel(cols["action"]),
-                              np.ravel(cols["next.reward"]), np.ravel(cols[column]),
-                              np.stack(cols[f"{column}.target"]), cols["episode_index"], cols["frame_index"],
+    states = cols["observation.state"]
+    if view:  # a dataset over many layouts: view states (hnsdt.models.view.view_states)
+        states = np.concatenate([states[:, :2], cols["observation.view"], states[:, 2:]], axis=1)
+    return frames_from_arrays(states, cols["action"], cols["next.reward"], cols[column], cols[f"{column}.target"],
+                              cols["episode_index"], cols["frame_index"],
                               policies.loc[cols["episode_index"]].to_numpy())

@@ -34,20 +34,13 @@ from lerobot.datasets import dataset_writer as _lerobot_writer  # noqa: E402
 from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
 
 from hnsdt.data.card import data_md5, render_card  # noqa: E402
-from hnsdt.data.features import REQUIRED_DTYPES, frame, info_features  # noqa: E402
+from hnsdt.data.features import frame, info_features  # noqa: E402
+from hnsdt.data.format import (EPISODES_TABLE, FORMAT_VERSION, HNSDT_META, DatasetError,  # noqa: E402,F401
+                               check_dataset, episode_table)
 from hnsdt.envs.layout import Layout  # noqa: E402
 from hnsdt.envs.observation import local_view  # noqa: E402
 from hnsdt.envs.render import render_rgb  # noqa: E402
 from hnsdt.fileio import atomic_dir  # noqa: E402
-
-HNSDT_META = "meta/hnsdt.json"
-EPISODES_TABLE = "meta/hnsdt_episodes.parquet"
-FORMAT_VERSION = 1
-
-
-class DatasetError(RuntimeError):
-    """A dataset that is missing, incomplete or not one of ours; the message says which file and why."""
-
 
 def dataset_features(layout: Layout, render_px: int = 0, view_radius: int = 0) -> dict:
     """The per-frame features of a dataset on ``layout`` (:mod:`hnsdt.data.features`); ``render_px`` > 0 adds
@@ -140,35 +133,6 @@ def _add_episode(ds: LeRobotDataset, ep: dict, features: dict, draw=None, view=N
         ds.add_frame(frame(ep, t, features))
 
 
-def check_dataset(root: str | Path) -> dict:
-    """Validate the files of one of our datasets and return its ``meta/hnsdt.json``; raise DatasetError."""
-    root = Path(root)
-    if not root.is_dir():
-        raise DatasetError(f"dataset {root}: no such folder (run `dvc repro collect` or `hnsdt collect`)")
-    for rel in ("meta/info.json", HNSDT_META, EPISODES_TABLE):
-        if not (root / rel).is_file():
-            raise DatasetError(f"dataset {root}: missing {rel}; the dataset is incomplete or not an hnsdt dataset")
-    try:
-        info = json.loads((root / "meta/info.json").read_text())
-        meta = json.loads((root / HNSDT_META).read_text())
-    except json.JSONDecodeError as e:
-        raise DatasetError(f"dataset {root}: corrupt JSON metadata ({e})") from None
-    if info.get("codebase_version") != "v3.0":
-        raise DatasetError(f"dataset {root}: LeRobot format {info.get('codebase_version')}, expected v3.0")
-    features = info.get("features", {})
-    missing = set(REQUIRED_DTYPES) - set(features)
-    if missing:
-        raise DatasetError(f"dataset {root}: features {sorted(missing)} are missing from meta/info.json")
-    for name, dtype in REQUIRED_DTYPES.items():
-        if features[name].get("dtype") != dtype:
-            raise DatasetError(f"dataset {root}: feature {name!r} has dtype {features[name].get('dtype')}, "
-                               f"expected {dtype} (meta/info.json)")
-    if not isinstance(info.get("total_episodes"), int) or info["total_episodes"] < 1:
-        raise DatasetError(f"dataset {root}: no episodes (meta/info.json total_episodes = "
-                           f"{info.get('total_episodes')!r})")
-    return meta
-
-
 def open_dataset(root: str | Path, delta_timestamps: dict | None = None, repo_id: str | None = None
                  ) -> LeRobotDataset:
     """Open one of our datasets with stock ``LeRobotDataset`` (offline), after checking its files."""
@@ -183,8 +147,3 @@ def open_dataset(root: str | Path, delta_timestamps: dict | None = None, repo_id
         raise DatasetError(f"dataset {root}: LeRobot cannot read it ({why})") from None
     finally:
         logging.disable(logging.NOTSET)
-
-
-def episode_table(root: str | Path) -> pd.DataFrame:
-    check_dataset(root)
-    return pd.read_parquet(Path(root) / EPISODES_TABLE)
