@@ -46,6 +46,21 @@ def small_dataset(tmp_path_factory, multikeydoor):
     return root
 
 
+def test_training_reads_the_frames_stock_lerobot_loads(small_dataset):
+    """hnsdt.data.format.frame_columns (pyarrow, no lerobot import) gives every frame column exactly as the
+    Arrow table of stock LeRobotDataset: the same values, dtypes and order."""
+    from hnsdt.data.features import REQUIRED_DTYPES
+    from hnsdt.data.format import frame_columns
+
+    names = [*REQUIRED_DTYPES, "episode_index", "frame_index"]
+    ours = frame_columns(small_dataset, names)
+    theirs = LeRobotDataset("local/multi", root=small_dataset).hf_dataset.with_format("numpy")[:]
+    for name in names:
+        expected = np.stack(theirs[name]) if theirs[name].dtype == object else np.asarray(theirs[name])
+        expected = expected[:, 0] if expected.ndim == 2 and expected.shape[1] == 1 else expected
+        assert ours[name].dtype == expected.dtype and np.array_equal(ours[name], expected), name
+
+
 def test_round_trip_through_stock_lerobot(small_dataset, multikeydoor):
     ds = LeRobotDataset("local/multi", root=small_dataset)
     table = episode_table(small_dataset)

@@ -83,10 +83,10 @@ def frame_columns(root: str | Path, names: list[str]) -> dict[str, np.ndarray]:
     for name in names:
         col = table.column(name).combine_chunks()
         if pa.types.is_list(col.type) or pa.types.is_fixed_size_list(col.type):
-            values = col.flatten().to_numpy()
+            values = col.flatten().to_numpy(zero_copy_only=False)
             out[name] = values.reshape(table.num_rows, -1)
             if out[name].shape[1] == 1:
                 out[name] = out[name][:, 0]
         else:
-            out[name] = col.to_numpy()
+            out[name] = col.to_numpy(zero_copy_only=False)
     return out
