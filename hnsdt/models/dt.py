@@ -104,9 +104,7 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
     def __init__(self, cfg: DTConfig):
         super().__init__(cfg)
         d = cfg.d_model
-        self.row_emb = nn.Embedding(cfg.grid_h, d)
-        self.col_emb = nn.Embedding(cfg.grid_w, d)
-        self.flag_proj = nn.Linear(max(cfg.n_flags, 1), d, bias=False)
+        self.build_state_encoder(d)
         self.action_emb = nn.Embedding(N_ACTIONS + (cfg.tokens == "step"), d)  # + NO_ACTION
         self.time_emb = nn.Embedding(cfg.max_timestep + 1, d)
         if cfg.condition == "subgoal":
@@ -125,6 +123,15 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         self.drop = nn.Dropout(cfg.dropout)
         self.register_buffer("causal_mask", nn.Transformer.generate_square_subsequent_mask(cfg.seq_len),
                              persistent=False)
+
+    def build_state_encoder(self, width: int) -> None:
+        """The part that turns a state into a ``width``-vector (:meth:`embed_states`), built first: here the
+        paper's state, ``(row, col)`` embeddings plus a linear map of the flags. A network that reads states
+        another way builds its own part here (:mod:`hnsdt.models.view`)."""
+        cfg = self.cfg
+        self.row_emb = nn.Embedding(cfg.grid_h, width)
+        self.col_emb = nn.Embedding(cfg.grid_w, width)
+        self.flag_proj = nn.Linear(max(cfg.n_flags, 1), width, bias=False)
 
     def embed_states(self, states: torch.Tensor) -> torch.Tensor:
         flags = states[..., 2:].float() if self.cfg.n_flags else states[..., :1].float() * 0

@@ -48,9 +48,7 @@ class RecurrentPolicy(Network, arch="recurrent", config=RecurrentConfig):
     def __init__(self, cfg: RecurrentConfig):
         super().__init__(cfg)
         d, h = cfg.embed, cfg.hidden
-        self.row_emb = nn.Embedding(cfg.grid_h, d)
-        self.col_emb = nn.Embedding(cfg.grid_w, d)
-        self.flag_proj = nn.Linear(max(cfg.n_flags, 1), d, bias=False)
+        self.build_state_encoder(d)
         self.prev_action_emb = nn.Embedding(N_ACTIONS + 1, d)
         rnn = nn.LSTM if cfg.cell == "lstm" else nn.GRU
         self.rnn = rnn(d, h, cfg.n_layers, batch_first=True, dropout=cfg.dropout if cfg.n_layers > 1 else 0.0)
@@ -60,6 +58,14 @@ class RecurrentPolicy(Network, arch="recurrent", config=RecurrentConfig):
             self.action_head = nn.Sequential(nn.Linear(2 * h, h), nn.ReLU(), nn.Linear(h, N_ACTIONS))
         else:
             self.action_head = nn.Linear(h, N_ACTIONS)
+
+    def build_state_encoder(self, width: int) -> None:
+        """The state's part, built first: ``(row, col)`` embeddings plus a linear map of the flags (a network
+        that reads states another way builds its own here, :mod:`hnsdt.models.view`)."""
+        cfg = self.cfg
+        self.row_emb = nn.Embedding(cfg.grid_h, width)
+        self.col_emb = nn.Embedding(cfg.grid_w, width)
+        self.flag_proj = nn.Linear(max(cfg.n_flags, 1), width, bias=False)
 
     def embed_states(self, states: torch.Tensor) -> torch.Tensor:
         flags = states[..., 2:].float() if self.cfg.n_flags else states[..., :1].float() * 0

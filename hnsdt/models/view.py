@@ -102,10 +102,9 @@ def view_config(condition: str, n_flags: int, view_radius: int, max_offset: int,
 
 class ViewDecisionTransformer(ViewModel, DecisionTransformer, arch="view_decision_transformer",
                               config=ViewDTConfig):
-    def __init__(self, cfg: ViewDTConfig):
-        super().__init__(cfg)
-        del self.row_emb, self.col_emb, self.flag_proj  # absolute positions are never read
-        self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, cfg.d_model, cfg.conv_layers,
+    def build_state_encoder(self, width: int) -> None:  # the view, never the absolute cell
+        cfg = self.cfg
+        self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, width, cfg.conv_layers,
                                 cfg.conv_channels)
 
     def embed_states(self, states: torch.Tensor) -> torch.Tensor:
@@ -127,10 +126,9 @@ class ViewRecurrentConfig(RecurrentConfig):
 
 
 class ViewRecurrentPolicy(ViewModel, RecurrentPolicy, arch="view_recurrent", config=ViewRecurrentConfig):
-    def __init__(self, cfg: ViewRecurrentConfig):
-        super().__init__(cfg)
-        del self.row_emb, self.col_emb, self.flag_proj
-        self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, cfg.embed)
+    def build_state_encoder(self, width: int) -> None:
+        cfg = self.cfg
+        self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, width)
 
     def embed_states(self, states: torch.Tensor) -> torch.Tensor:
         return self.view(states)
