@@ -17,6 +17,7 @@ import yaml
 
 from hnsdt.fileio import TMP_PREFIX
 from hnsdt.methods import LEARNED, METHODS
+from conftest import hnsdt_cli
 from tiny_repo import REPO, lock_outs, make_tiny_repo, ran_stages, run
 
 pytestmark = pytest.mark.slow  # (pytest-xdist runs a file on one worker, in order: `--dist loadfile`)
@@ -164,15 +165,12 @@ def test_every_stage_depends_on_the_code_it_runs(repo_copy, first_run):
 
 
 def test_replay_points_to_an_evaluated_episode(repo_copy):
-    out = subprocess.run([sys.executable, "-m", "hnsdt.cli", "replay", "hnsdt/keydoor/fp0.2/seed0/ep0"],
-                         cwd=repo_copy, capture_output=True, text=True)
+    out = hnsdt_cli("replay", "hnsdt/keydoor/fp0.2/seed0/ep0", cwd=repo_copy)
     assert out.returncode == 0, out.stderr
     assert "recordings/hnsdt/keydoor/fp0.2/seed0/ep0.rrd" in out.stdout and ".mcap" in out.stdout
-    missing = subprocess.run([sys.executable, "-m", "hnsdt.cli", "replay", "hnsdt/keydoor/fp0.2/seed0/ep3"],
-                             cwd=repo_copy, capture_output=True, text=True)
+    missing = hnsdt_cli("replay", "hnsdt/keydoor/fp0.2/seed0/ep3", cwd=repo_copy)
     assert missing.returncode == 2 and "was not recorded" in missing.stderr
-    cell = subprocess.run([sys.executable, "-m", "hnsdt.cli", "replay", "*/keydoor/fp0.2/seed0/ep0"],
-                          cwd=repo_copy, capture_output=True, text=True)  # every method's episode of one cell
+    cell = hnsdt_cli("replay", "*/keydoor/fp0.2/seed0/ep0", cwd=repo_copy)  # every method's episode of one cell
     assert cell.returncode == 0, cell.stderr
     opened = cell.stdout.splitlines()[-1]
     assert opened.startswith("open with: rerun ") and opened.count(".rrd") == len(METHODS)
@@ -185,9 +183,8 @@ def test_the_trained_models_run_on_a_folder_of_a_users_maps(tmp_path, repo_copy,
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine/long_corridor.txt").write_text("@.........a\n#########A#\nG..........\n")
     before = (repo_copy / "generalisation/results/summary.csv").read_bytes()
-    out = subprocess.run([sys.executable, "-m", "hnsdt.cli", "generalisation", "evaluate", "--drawn",
-                          str(tmp_path / "mine"), "--out", str(tmp_path / "results"), "--quiet"],
-                         cwd=repo_copy, capture_output=True, text=True)
+    out = hnsdt_cli("generalisation", "evaluate", "--drawn", tmp_path / "mine", "--out", tmp_path / "results",
+                    "--quiet", cwd=repo_copy)
     assert out.returncode == 0, out.stderr
     episodes = pd.read_csv(tmp_path / "results/episodes.csv")
     drawn = episodes[episodes.split == "drawn"]
