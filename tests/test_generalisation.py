@@ -227,7 +227,7 @@ def test_the_convolutional_view_encoder_reads_a_pattern_alike_wherever_it_sits()
     states = torch.cat([torch.zeros(2, 2, dtype=torch.long), codes, torch.ones(2, 1, dtype=torch.long)], dim=1)
     assert enc(states).shape == (2, 8) and not torch.allclose(enc(states)[0], enc(states)[1])
     plain = ViewEncoder(radius=4, code_dim=4, n_flags=1, width=8)
-    assert not hasattr(plain, "convs") and plain.view_proj.in_features == side * side * 4
+    assert plain.convs is None and plain.view_proj.in_features == side * side * 4
 
 
 def _view_frames(layouts, max_steps: int, fail_probs: list, behaviours: list):

@@ -63,13 +63,12 @@ def episode_table(root: str | Path) -> pd.DataFrame:
 
 
 def frame_columns(root: str | Path, names: list[str]) -> dict[str, np.ndarray]:
-    """The frame columns ``names`` of a checked dataset as numpy, one row per frame in index order: a vector
+    """The frame columns ``names`` of a dataset (checked by the caller: :func:`check_dataset`) as numpy, one row per frame in index order: a vector
     feature as (frames, size), a scalar one (stored as a 1-element vector or a plain value) as (frames,)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
     root = Path(root)
-    check_dataset(root)
     files = sorted((root / "data").rglob("*.parquet"))
     if not files:
         raise DatasetError(f"dataset {root}: no data/**/*.parquet files")

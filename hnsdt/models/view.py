@@ -47,6 +47,7 @@ class ViewEncoder(nn.Module):
         super().__init__()
         self.radius = radius
         self.code_emb = nn.Embedding(N_CODES, code_dim)
+        self.convs = None  # (no convolutions: the parameters, and so the bytes, of the flattened encoder)
         if conv_layers:
             widths = [code_dim] + [conv_channels] * conv_layers
             self.convs = nn.Sequential(*(layer for a, b in zip(widths, widths[1:])
@@ -59,7 +60,7 @@ class ViewEncoder(nn.Module):
         if flags.shape[-1] == 0:
             flags = torch.zeros(*flags.shape[:-1], 1, device=flags.device)
         cells = self.code_emb(codes)  # (..., cells, code_dim)
-        if hasattr(self, "convs"):
+        if self.convs is not None:
             side = 2 * self.radius + 1
             grid = cells.reshape(-1, side, side, cells.shape[-1]).permute(0, 3, 1, 2)
             cells = self.convs(grid).permute(0, 2, 3, 1).reshape(*codes.shape, -1)
