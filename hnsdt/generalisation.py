@@ -187,7 +187,7 @@ def network_configs(params: Params, method: str, seed: int):
                                f"generalisation family {g.family})")
         try:
             cfg = view_config(entry.condition, lay.n_flags, g.view_radius, g.max_offset, g.conv_layers,
-                              max_timestep=g.max_steps, dropout=params.train.dropout,
+                              g.value_iterations, max_timestep=g.max_steps, dropout=params.train.dropout,
                               formulation=ts.formulation[method],
                               **models[g.family].model_dump())
         except ValueError as e:

@@ -176,6 +176,9 @@ class GeneralisationParams(Section):
     view_radius: PositiveInt = Field(2, description="the learners see (2r+1) x (2r+1) cells around the agent")
     conv_layers: int = Field(0, ge=0, description="the decision transformers' view encoder: this many 3x3 "
                              "convolutions before the projection (0: the cell embeddings flattened)")
+    value_iterations: int = Field(0, ge=0, description="the decision transformers' view encoder: > 0 plans over "
+                                  "the view towards the sub-goal's target with a value-iteration module of this "
+                                  "many backups (0: none)")
     episodes_per_layout: PositiveInt = Field(description="noisy-planner episodes per training layout and start "
                                              "(the layout's start and random starts)")
     epsilon: Probability = Field(0.1, description="the noisy planner's share of random actions")

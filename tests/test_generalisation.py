@@ -230,6 +230,78 @@ def test_the_convolutional_view_encoder_reads_a_pattern_alike_wherever_it_sits()
     assert plain.convs is None and plain.view_proj.in_features == side * side * 4
 
 
+def test_the_value_iteration_encoder_marks_the_target_and_plans_around_walls():
+    """``generalisation.value_iterations``: the target's mark sits at its offset in the view (at the edge, the
+    direction kept, when it lies beyond; none: no mark), and the backups spread value along floor, not through
+    walls. With the weights of textbook value iteration set by hand (reward: +1 at the mark, -10 on walls; one
+    action value per move, discounted), the agent's best neighbour is the one towards the wall's opening, not
+    its mirror image (which a value spread through walls would rate the same)."""
+    import torch
+
+    from hnsdt.models.view import ValueIteration, ViewEncoder
+
+    enc = ViewEncoder(radius=4, code_dim=4, n_flags=1, width=8, value_iterations=3)
+    targets = torch.tensor([[0, 0, 1], [-2, 1, 1], [20, -6, 1], [3, 3, 0]])
+    mark = enc.target_mark(targets, 4, "cpu")[:, 0]
+    assert mark.sum(dim=(1, 2)).tolist() == [1, 1, 1, 0]
+    assert mark[0, 4, 4] == mark[1, 2, 5] == mark[2, 8, 0] == 1
+    with pytest.raises(ValueError, match="episode"):
+        from hnsdt.models.view import view_config
+        view_config("subgoal", 1, 2, 7, value_iterations=4, formulation="window")
+
+    side, gamma = 9, 0.9
+    vi = ValueIteration(in_channels=1, iterations=12, channels=8, hidden=2)
+    with torch.no_grad():
+        for p in vi.parameters():
+            p.zero_()
+        vi.reward[0].weight[0, 1, 1, 1] = 1.0  # hidden 0: the mark
+        vi.reward[0].weight[1, 0, 1, 1] = 1.0  # hidden 1: the wall
+        vi.reward[2].weight[0, :, 0, 0] = torch.tensor([1.0, -10.0])
+        vi.q_from_reward.weight[:4, 0, 1, 1] = 1.0
+        for a, (r, c) in enumerate(((0, 1), (2, 1), (1, 0), (1, 2))):  # up, down, left, right
+            vi.q_from_value.weight[a, 0, r, c] = gamma
+    walls = torch.zeros(1, 1, side, side)
+    walls[0, 0, 3, 1:] = 1  # a wall across the view right above the agent (centre), open at the left edge
+    target = torch.zeros(1, 1, side, side)
+    target[0, 0, 1, 4] = 1
+    with torch.no_grad():
+        near = vi(walls, target)[0, 8:]
+    assert near.argmax().item() == 2, near  # left, towards the opening; right mirrors it but leads nowhere
+    assert near[2] > near[3] > 0
+    open_room = vi(torch.zeros_like(walls), target)[0, 8:]
+    assert open_room.argmax().item() == 0  # without the wall: straight up
+
+
+def test_the_planning_view_dt_steps_as_its_episode_pass():
+    """The value-iteration encoder reads each step's own target: a step through the key/value cache gives the
+    logits of the whole-episode pass."""
+    import torch
+
+    from hnsdt.models.view import ViewDecisionTransformer, view_config
+
+    cfg = view_config("subgoal", 1, 3, 7, value_iterations=4, formulation="episode", context=4, n_layers=2,
+                      n_heads=2, d_model=16, max_timestep=20)
+    torch.manual_seed(0)
+    model = ViewDecisionTransformer(cfg).eval()
+    g = torch.Generator().manual_seed(1)
+    B, T = 3, 7
+    states = torch.cat([torch.randint(0, 8, (B, T, 2), generator=g), torch.randint(0, 6, (B, T, 49), generator=g),
+                        torch.randint(0, 2, (B, T, 1), generator=g)], dim=-1)
+    actions, steps = torch.randint(0, 5, (B, T), generator=g), torch.arange(T).repeat(B, 1)
+    ids, targets = torch.randint(0, 4, (B, T), generator=g), torch.randint(0, 8, (B, T, 2), generator=g)
+    targets[:, 2] = -1  # no sub-goal at one step
+    with torch.no_grad():
+        full = model(states, actions, steps, None, subgoal_ids=ids, subgoal_targets=targets)
+        moved = targets.clone()
+        moved[:, 4] = (moved[:, 4] + 3) % 8
+        assert not torch.allclose(model(states, actions, steps, None, subgoal_ids=ids, subgoal_targets=moved)[:, 4],
+                                  full[:, 4])
+    cache, rows = model.start(B), torch.arange(B)
+    got = torch.stack([model.step(cache, rows, states[:, t], torch.full((B,), 5) if t == 0 else actions[:, t - 1],
+                                  steps[:, t], ids[:, t], targets[:, t]) for t in range(T)], dim=1)
+    assert torch.allclose(got, full, atol=1e-5)
+
+
 def _view_frames(layouts, max_steps: int, fail_probs: list, behaviours: list):
     """Training frames of view states (radius 2) from episodes collected on each layout (seed = its index)."""
     from hnsdt.data.collect import CollectConfig, collect_episodes

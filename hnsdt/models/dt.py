@@ -133,7 +133,9 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         self.col_emb = nn.Embedding(cfg.grid_w, width)
         self.flag_proj = nn.Linear(max(cfg.n_flags, 1), width, bias=False)
 
-    def embed_states(self, states: torch.Tensor) -> torch.Tensor:
+    def embed_states(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
+        """(…, d_model) of states; ``targets`` (each step's absolute sub-goal target, -1: none) is there for a
+        state encoder that plans towards it (:mod:`hnsdt.models.view`); this one does not read it."""
         flags = states[..., 2:].float() if self.cfg.n_flags else states[..., :1].float() * 0
         return self.row_emb(states[..., 0]) + self.col_emb(states[..., 1]) + self.flag_proj(flags)
 
@@ -150,7 +152,8 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         """The episode formulation's token of each step: state + previous action + timestep + its own
         conditioning (sub-goal and target, or return-to-go)."""
         cfg = self.cfg
-        x = (self.embed_states(states) + self.action_emb(prev_actions)
+        x = (self.embed_states(states, subgoal_targets if cfg.condition == "subgoal" else None)
+             + self.action_emb(prev_actions)
              + self.time_emb(timesteps.clamp(0, cfg.max_timestep)) + self.type_emb.weight[0])
         if cfg.condition == "subgoal":
             x = x + self.embed_subgoals(subgoal_ids, self.subgoal_targets(states, subgoal_targets))
