@@ -63,13 +63,15 @@ def training_layouts(params: Params) -> list[Source]:
     return [Source("train", generate(g.family, s), g.max_steps) for s in range(g.train_layouts)]
 
 
-def _unseen(params: Params, split: str, first_seed: int, n: int, seen: list[Source]) -> list[Source]:
-    """``n`` generated layouts of the family from seed ``first_seed`` on, skipping any grid in ``seen``."""
+def _unseen(params: Params, split: str, first_seed: int, n: int, seen: list[Source],
+            family: str | None = None) -> list[Source]:
+    """``n`` generated layouts of ``family`` (default: the experiment's) from seed ``first_seed`` on, skipping
+    any grid in ``seen``."""
     from hnsdt.envs.generate import generate
 
     g, texts, out, seed = settings(params), {s.layout.text for s in seen}, [], first_seed
     while len(out) < n:
-        layout = generate(g.family, seed)
+        layout = generate(family or g.family, seed)
         if layout.text not in texts:
             out.append(Source(split, layout, g.max_steps))
         seed += 1
@@ -77,10 +79,19 @@ def _unseen(params: Params, split: str, first_seed: int, n: int, seen: list[Sour
 
 
 def validation_layouts(params: Params) -> list[Source]:
-    """The layouts budgets are chosen on: seeds from :data:`VALIDATION_SEED`, none a training or held-out grid."""
+    """The layouts budgets are chosen on: seeds from :data:`VALIDATION_SEED` of the training family, or of each
+    of ``validation_families``; none a training or held-out grid."""
+    g = settings(params)
     train = training_layouts(params)
-    seen = train + _unseen(params, "heldout", HELDOUT_SEED, settings(params).heldout_layouts, train)
-    return _unseen(params, "validation", VALIDATION_SEED, settings(params).validation_layouts, seen)
+    seen = train + _unseen(params, "heldout", HELDOUT_SEED, g.heldout_layouts, train)
+    out = [src for family in (g.validation_families or [g.family])
+           for src in _unseen(params, "validation", VALIDATION_SEED, g.validation_layouts, seen, family)]
+    flags = train[0].layout.n_flags
+    for src in out:
+        if src.layout.n_flags != flags:
+            raise params.error(f"generalisation.validation_families: {src.name} has {src.layout.n_flags} keys, "
+                               f"doors and items, the training family {g.family} {flags} (one network reads both)")
+    return out
 
 
 def drawn_layouts(folder: str | Path, max_steps: int) -> list[Source]:

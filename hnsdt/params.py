@@ -167,6 +167,9 @@ class GeneralisationParams(Section):
     validation_layouts: int = Field(0, ge=0, description="validation layouts: seeds 200000.., never in training or "
                                     "evaluation; each DT with a train.validation entry trains to the plateau of its "
                                     "steps to the exit on them (0: the paper protocol's train.validation)")
+    validation_families: list[Literal[FAMILIES]] = Field(
+        default_factory=list, description="validation_layouts of each of these families (empty: the training "
+        "family's): one split of several shapes, on which training families can be compared")
     minigrid: list[MiniGridSource] = Field(default_factory=list, description="MiniGrid grids, zero-shot")
     drawn: DrawnSource | None = Field(None, description="a folder of layout files (maps of any shape), zero-shot")
     max_offset: PositiveInt = Field(7, description="a sub-goal target further than this many cells along an axis "

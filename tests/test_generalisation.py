@@ -616,6 +616,28 @@ def test_no_two_splits_share_a_map_and_validation_is_never_evaluated():
         g.family, gen.VALIDATION_SEED + 1)
 
 
+def test_a_validation_split_of_several_families():
+    """``generalisation.validation_families``: ``validation_layouts`` maps of each listed family (its own
+    validation seeds), none a training or held-out grid; a family whose flags differ is one clear error."""
+    from hnsdt import generalisation as gen
+    from hnsdt.config import load_params
+    from hnsdt.envs.generate import generate
+    from hnsdt.params import ParamsError
+
+    families = ["keydoor", "keydoor_maze", "keydoor_obstacles"]
+    params = load_params(REPO / "params.yaml", [f"generalisation.validation_families={families}",
+                                                "generalisation.validation_layouts=3"])
+    validation = gen.validation_layouts(params)
+    assert [s.layout.text for s in validation[3:6]] == [generate("keydoor_maze", gen.VALIDATION_SEED + i).text
+                                                        for i in range(3)]
+    assert len(validation) == 9 and len({s.layout.text for s in validation}) == 9
+    seen = {s.layout.text for s in gen.layout_splits(params) if s.split in ("train", "heldout")}
+    assert not seen & {s.layout.text for s in validation}
+    bad = load_params(REPO / "params.yaml", ["generalisation.validation_families=[keydoor, multikeydoor]"])
+    with pytest.raises(ParamsError, match="validation_families: .*keys, doors and items"):
+        gen.validation_layouts(bad)
+
+
 def test_no_network_depends_on_the_maps_it_is_evaluated_on(tmp_path):
     """Bigger evaluation maps (MiniGrid 16x16 with longer episodes), other held-out and hand-drawn ones: the
     same network and training configs; targets further than ``max_offset`` are clamped, direction kept."""
