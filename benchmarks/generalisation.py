@@ -7,7 +7,9 @@ method and split, averaged over the failure probabilities) and the time each par
 
 Run: python benchmarks/generalisation.py [--family multikeydoor] [--train-layouts 40] [--heldout-layouts 10]
      [--seeds 0 1 2] [--methods hnsdt pure_dt] [--episodes 10] [--no-minigrid] [--no-drawn] [--set KEY=VALUE ...]
-(`--set` takes a `generalisation` key as YAML, e.g. `--set max_steps=250 --set 'budgets={gru: {epochs: 20}}'`.)
+(`--set` takes a `generalisation` key as YAML, e.g. `--set max_steps=250 --set 'budgets={gru: {epochs: 20}}'`;
+`--set 'validation_families=[keydoor, keydoor_maze, keydoor_obstacles]' --set max_steps=150` measures every
+training family on one validation split of three shapes, with one step limit.)
 """
 
 import argparse
@@ -102,8 +104,9 @@ def main() -> None:
     if per_map:
         print("\nper hand-drawn map (success):\n" + per_map)
     if validation:
-        print(f"\nvalidation layouts ({g['validation_layouts']}), mean steps to the exit at fail_prob 0 of the "
-              "epoch kept: " + "; ".join(validation))
+        families = ", ".join(g.get("validation_families") or [g["family"]])
+        print(f"\nvalidation layouts ({g['validation_layouts']} of {families}), mean steps to the exit at fail_prob 0 "
+              "of the epoch kept: " + "; ".join(validation))
     print("\n" + ", ".join(f"{k} {v:.0f} s" for k, v in times.items()) + f"; total {sum(times.values()):.0f} s")
 
 
