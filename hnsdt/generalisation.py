@@ -86,11 +86,11 @@ def validation_layouts(params: Params) -> list[Source]:
     seen = train + _unseen(params, "heldout", HELDOUT_SEED, g.heldout_layouts, train)
     out = [src for family in (g.validation_families or [g.family])
            for src in _unseen(params, "validation", VALIDATION_SEED, g.validation_layouts, seen, family)]
-    flags = train[0].layout.n_flags
-    for src in out:
-        if src.layout.n_flags != flags:
-            raise params.error(f"generalisation.validation_families: {src.name} has {src.layout.n_flags} keys, "
-                               f"doors and items, the training family {g.family} {flags} (one network reads both)")
+    other = _other_flags(train[:1] + out)
+    if other is not None:
+        raise params.error(f"generalisation.validation_families: {other.name} has {other.layout.n_flags} keys, doors "
+                           f"and items, the training family {g.family} {train[0].layout.n_flags} (one network reads "
+                           "both)")
     return out
 
 
@@ -120,15 +120,20 @@ def layout_splits(params: Params, evaluated_only: bool = False) -> list[Source]:
     return out
 
 
+def _other_flags(sources: list[Source]) -> Source | None:
+    """The first layout whose keys, doors and items differ in number from the first one's (None: all alike)."""
+    return next((s for s in sources if s.layout.n_flags != sources[0].layout.n_flags), None)
+
+
 def check_sources(sources: list[Source], fail_prob: float) -> None:
     """Every layout usable at the highest failure probability, and all with the same flags (one network)."""
     from hnsdt.envs.generate import check_usable
 
-    for src in sources:
-        if src.layout.n_flags != sources[0].layout.n_flags:
-            raise ValueError(f"generalisation: layout {src.name} ({src.split}) has {src.layout.n_flags} keys, doors "
-                             f"and items, the {sources[0].split} layouts {sources[0].layout.n_flags} (one network "
-                             "reads every split's flags)")
+    other = _other_flags(sources)
+    if other is not None:
+        raise ValueError(f"generalisation: layout {other.name} ({other.split}) has {other.layout.n_flags} keys, doors "
+                         f"and items, the {sources[0].split} layouts {sources[0].layout.n_flags} (one network reads "
+                         "every split's flags)")
     for src in sources:
         check_usable(src.layout, src.max_steps, fail_prob)
 

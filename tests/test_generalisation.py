@@ -238,7 +238,7 @@ def test_the_value_iteration_encoder_marks_the_target_and_plans_around_walls():
     its mirror image (which a value spread through walls would rate the same)."""
     import torch
 
-    from hnsdt.models.view import ValueIteration, ViewEncoder
+    from hnsdt.models.view import ValueIteration, ViewEncoder, view_config
 
     enc = ViewEncoder(radius=4, code_dim=4, n_flags=1, width=8, value_iterations=3)
     targets = torch.tensor([[0, 0, 1], [-2, 1, 1], [20, -6, 1], [3, 3, 0]])
@@ -246,7 +246,6 @@ def test_the_value_iteration_encoder_marks_the_target_and_plans_around_walls():
     assert mark.sum(dim=(1, 2)).tolist() == [1, 1, 1, 0]
     assert mark[0, 4, 4] == mark[1, 2, 5] == mark[2, 8, 0] == 1
     with pytest.raises(ValueError, match="episode"):
-        from hnsdt.models.view import view_config
         view_config("subgoal", 1, 2, 7, value_iterations=4, formulation="window")
 
     side, gamma = 9, 0.9

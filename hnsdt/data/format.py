@@ -63,8 +63,9 @@ def episode_table(root: str | Path) -> pd.DataFrame:
 
 
 def frame_columns(root: str | Path, names: list[str]) -> dict[str, np.ndarray]:
-    """The frame columns ``names`` of a dataset (checked by the caller: :func:`check_dataset`) as numpy, one row per frame in index order: a vector
-    feature as (frames, size), a scalar one (stored as a 1-element vector or a plain value) as (frames,)."""
+    """The frame columns ``names`` of a dataset (checked by the caller: :func:`check_dataset`) as numpy, one row
+    per frame in index order: a vector feature as (frames, size), a scalar one (stored as a 1-element vector or a
+    plain value) as (frames,)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 

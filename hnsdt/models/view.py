@@ -58,7 +58,7 @@ class ValueIteration(nn.Module):
         self.reward = nn.Sequential(nn.Conv2d(in_channels + 1, hidden, 3, padding=1), nn.ReLU(),
                                     nn.Conv2d(hidden, 1, 1))
         self.q_from_reward = nn.Conv2d(1, channels, 3, padding=1, bias=False)
-        self.q_from_value = nn.Conv2d(1, channels, 3, padding=1, bias=False)
+        self.q_from_value = nn.Conv2d(1, channels, 3, padding=1, bias=False)  # its weight, applied via _taps
         self.out_features = channels + 4
 
     def forward(self, grid: torch.Tensor, mark: torch.Tensor) -> torch.Tensor:
@@ -109,19 +109,20 @@ class ViewEncoder(nn.Module):
             flags = torch.zeros(*flags.shape[:-1], 1, device=flags.device)
         cells = self.code_emb(codes)  # (..., cells, code_dim)
         if self.convs is None and self.plan is None:
-            return self.view_proj(cells.flatten(-2)) + self.flag_proj(flags)
-        side = 2 * self.radius + 1
-        grid = cells.reshape(-1, side, side, cells.shape[-1]).permute(0, 3, 1, 2)
-        if self.convs is not None:
-            grid = self.convs(grid)
-        if self.plan is None:
-            cells = grid.permute(0, 2, 3, 1).reshape(*codes.shape, -1)
-            return self.view_proj(cells.flatten(-2)) + self.flag_proj(flags)
-        r = self.radius
-        around = grid[:, :, r - 1:r + 2, r - 1:r + 2].flatten(1)  # the agent's 3 x 3 cells
-        plan = self.plan(grid, self.target_mark(targets, grid.shape[0], grid.device))
-        out = self.view_proj(torch.cat([around, plan], dim=-1)).reshape(*codes.shape[:-1], -1)
-        return out + self.flag_proj(flags)
+            features = cells.flatten(-2)
+        else:
+            side, r = 2 * self.radius + 1, self.radius
+            grid = cells.reshape(-1, side, side, cells.shape[-1]).permute(0, 3, 1, 2)
+            if self.convs is not None:
+                grid = self.convs(grid)
+            if self.plan is None:
+                features = grid.permute(0, 2, 3, 1).flatten(1)
+            else:
+                around = grid[:, :, r - 1:r + 2, r - 1:r + 2].flatten(1)  # the agent's 3 x 3 cells
+                plan = self.plan(grid, self.target_mark(targets, grid.shape[0], grid.device))
+                features = torch.cat([around, plan], dim=-1)
+            features = features.reshape(*codes.shape[:-1], -1)
+        return self.view_proj(features) + self.flag_proj(flags)
 
     def target_mark(self, targets: torch.Tensor | None, n: int, device) -> torch.Tensor:
         """(n, 1, side, side): 1 at the target's cell of the view (a target beyond the view at its edge, the
