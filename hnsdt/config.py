@@ -209,10 +209,12 @@ class BaselineSettings:
     eval_epsilon: float = 0.0  # online methods: the evaluation's exploration (0 = greedy)
 
 
-def baseline_settings(params: Params, method: str, env: str | EnvSpec, seed: int) -> BaselineSettings:
+def baseline_settings(params: Params, method: str, env: str | EnvSpec, seed: int,
+                      env_steps: int | None = None) -> BaselineSettings:
     """The knobs of ``baselines.<method>`` on one env and seed; unknown keys and wrongly typed values are
     errors. ``env``: a key of ``envs``, or the spec of a generated family (the unseen-layout experiment: a
-    per-env budget is then looked up under the family's name)."""
+    per-env budget is then looked up under the family's name, unless ``env_steps``, a budget of its own,
+    replaces it)."""
     from hnsdt.models.train import pick_device
 
     if method not in BASELINES:
@@ -237,7 +239,7 @@ def baseline_settings(params: Params, method: str, env: str | EnvSpec, seed: int
             raise params.error(f"{key}.behaviours must be a list drawn from {POLICIES}, got {behaviours!r}")
         train_fixed["behaviours"] = tuple(behaviours)
     if "env_steps" in train_fields:  # online: a budget of environment steps, one number or one per env
-        budget = section.get("env_steps")
+        budget = section.get("env_steps") if env_steps is None else env_steps
         if isinstance(budget, dict):
             budget = budget.get(env.name)
         if not isinstance(budget, int) or isinstance(budget, bool) or budget < 1:

@@ -562,6 +562,15 @@ def test_a_methods_budget_replaces_the_protocols_knobs_and_a_bad_one_is_named(tm
     params["generalisation"]["budgets"] = {"gru": {"epochs": "3"}}
     with pytest.raises(ParamsError, match=r"generalisation.budgets.gru.epochs must be int, got '3'"):
         gen.network_configs(validate(params), "gru", 0)
+    params["baselines"]["dqn"]["env_steps"] = {"keydoor": 100}  # a budget per paper env, none for the mazes:
+    params["generalisation"].update(family="keydoor_maze", budgets={"dqn": {"env_steps": 77}})  # the family's
+    assert gen.network_configs(validate(params), "dqn", 0)[1].env_steps == 77  # own budget stands in
+    params["generalisation"]["budgets"] = {}
+    with pytest.raises(ParamsError, match=r"baselines.dqn.env_steps .* \(missing or bad for 'keydoor_maze'"):
+        gen.network_configs(validate(params), "dqn", 0)
+    params["generalisation"]["budgets"] = {"dqn": {"env_steps": "many"}}
+    with pytest.raises(ParamsError, match=r"generalisation.budgets.dqn.env_steps must be a positive integer, got 'many'"):
+        gen.network_configs(validate(params), "dqn", 0)
 
 
 def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operators(tmp_path):
