@@ -686,6 +686,7 @@ def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
     return {"generalisation_table": "\n".join(lines), "generalisation_detail": "\n".join(detail),
             "generalisation_targets": target_lines(summ),
             "generalisation_validation": g.validation_layouts if g else 0,
+            "generalisation_validation_families": list(g.validation_families) if g else [],
             "generalisation_family": g.family if g else "?", "generalisation_train": g.train_layouts if g else "?",
             "generalisation_radius": g.view_radius if g else "?",
             "generalisation_splits": [f"{SPLIT_LABELS.get(s, s)}: {n} ({sizes[s]} cells)" for s, n in counts.items()],
