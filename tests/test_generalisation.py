@@ -614,7 +614,8 @@ def test_no_two_splits_share_a_map_and_validation_is_never_evaluated():
     params = load_params(REPO / "params.yaml", [f"generalisation.drawn.folder={REPO / 'layouts/drawn'}"])
     evaluated, validation = gen.layout_splits(params), gen.validation_layouts(params)
     g = params.generalisation
-    assert len(validation) == g.validation_layouts > 0 and {s.split for s in validation} == {"validation"}
+    assert len(validation) == g.validation_layouts * len(g.validation_families) > 0  # each family's
+    assert {s.split for s in validation} == {"validation"}
     assert {s.split for s in evaluated} == {"train", "heldout", "minigrid", "drawn"}
     texts = [s.layout.text for s in evaluated + validation]
     assert len(set(texts)) == len(texts)
@@ -677,14 +678,15 @@ def test_the_dts_budget_is_chosen_on_the_validation_layouts(tmp_path):
 
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"].update(methods=["hnsdt"], baselines=["gru"], validation_layouts=2)
-    params["train"]["validation"]["hnsdt"].update(starts=6, max_epochs=4)
+    params["train"]["validation"]["hnsdt"].update(starts=12, max_epochs=4)
     dataset = gen.collect(validate(params), tmp_path / "ds", {}, progress=False)
     (run,) = gen.plan_runs(validate(params), "hnsdt", dataset)
     validation = gen.validation_layouts(validate(params))
     assert run.train_cfg.validation == 0.0 and run.train_cfg.epochs == 4
     assert [c.layout for c in run.measure.courses] == [s.layout for s in validation]
-    for course, src in zip(run.measure.courses, validation):
-        assert len(course.starts) == 3 and (course.starts[0, :2] == src.layout.start).all()
+    assert len(validation) == 2 * len(params["generalisation"]["validation_families"]) == 6  # 2 of each family
+    for course, src in zip(run.measure.courses, validation):  # the 12 starts spread: the start and a random one
+        assert len(course.starts) == 2 and (course.starts[0, :2] == src.layout.start).all()
     (baseline,) = gen.plan_runs(validate(params), "gru", dataset)
     assert baseline.measure is None
     params["generalisation"]["validation_layouts"] = 0  # the paper protocol's budget
