@@ -9,7 +9,10 @@ Run: python benchmarks/generalisation.py [--family multikeydoor] [--train-layout
      [--seeds 0 1 2] [--methods hnsdt pure_dt] [--episodes 10] [--no-minigrid] [--no-drawn] [--set KEY=VALUE ...]
 (`--set` takes a `generalisation` key as YAML, e.g. `--set max_steps=250 --set 'budgets={gru: {epochs: 20}}'`;
 `--set 'validation_families=[keydoor, keydoor_maze, keydoor_obstacles]' --set max_steps=150` measures every
-training family on one validation split of three shapes, with one step limit.)
+training family on one validation split of three shapes, with one step limit. `--relabel N` adds rounds of the
+learner's own states labelled by the planner (hnsdt.data.relabel, DAgger): after a decision transformer with a
+sub-goal token trains, it acts N episodes per training layout, each step is labelled with the controller's
+action, and it trains again on the dataset plus those frames; `--relabel-rounds R` repeats it R times.)
 """
 
 import argparse
@@ -48,6 +51,9 @@ def main() -> None:
     ap.add_argument("--no-minigrid", action="store_true", help="no MiniGrid split (a family whose flags differ)")
     ap.add_argument("--no-drawn", action="store_true", help="no hand-drawn split (a family whose flags differ)")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--relabel", type=int, default=0, metavar="N",
+                    help="learner episodes per training layout labelled by the planner, then train again (DAgger)")
+    ap.add_argument("--relabel-rounds", type=int, default=1, metavar="R")
     args = ap.parse_args()
     raw = copy.deepcopy(load_params(args.params).raw)
     g = raw["generalisation"]
@@ -81,9 +87,17 @@ def main() -> None:
         times["collect"] = time.perf_counter() - t0
         for method in g["methods"] + g["baselines"]:
             t0 = time.perf_counter()
-            train_all(gen.plan_runs(params, method, dataset), g["family"], tmp / "models" / method,
-                      tmp / "curves" / method, compute, progress=False)
+            runs = gen.plan_runs(params, method, dataset)
+            train_all(runs, g["family"], tmp / "models" / method, tmp / "curves" / method, compute, progress=False)
             times[f"train {method}"] = time.perf_counter() - t0
+            for r in range(args.relabel_rounds if args.relabel and runs[0].model_cfg.condition == "subgoal" else 0):
+                t0 = time.perf_counter()
+                runs = [relabelled_run(params, run, tmp / "models" / method, args.relabel) for run in runs]
+                times[f"relabel {method} round {r + 1}"] = time.perf_counter() - t0
+                t0 = time.perf_counter()
+                train_all(runs, g["family"], tmp / "models" / method, tmp / "curves" / method, compute,
+                          progress=False)
+                times[f"train {method} round {r + 1}"] = time.perf_counter() - t0
             for seed in g["seeds"]:  # the budget's measure on the validation layouts (choices are made on it)
                 usage = load_checkpoint(tmp / "models" / method / f"seed{seed}")[1].get("usage", {})
                 if usage.get("validation_steps"):
@@ -108,6 +122,25 @@ def main() -> None:
         print(f"\nvalidation layouts ({g['validation_layouts']} of {families}), mean steps to the exit at fail_prob 0 "
               "of the epoch kept: " + "; ".join(validation))
     print("\n" + ", ".join(f"{k} {v:.0f} s" for k, v in times.items()) + f"; total {sum(times.values()):.0f} s")
+
+
+def relabelled_run(params, run, models: Path, episodes: int):
+    """``run`` with its seed's trained model's own episodes on the training layouts, labelled by the planner,
+    added to its data (and to the behaviours it learns from)."""
+    from dataclasses import replace
+
+    from hnsdt.config import method_executor
+    from hnsdt.data.relabel import RELABELLED, join_frames, learner_frames
+
+    g = gen.settings(params)
+    model, meta = load_checkpoint(models / f"seed{run.seed}")
+    frames = learner_frames(model, run.method, meta, [s.layout for s in gen.training_layouts(params)],
+                            method_executor(params, run.method), g.view_radius, g.max_steps,
+                            [float(f) for f in params.collect.fail_probs], episodes, run.seed)
+    print(f"relabelled {run.method} seed {run.seed}: {frames.episode.max() + 1} episodes, {len(frames)} frames",
+          flush=True)
+    behaviours = tuple(run.train_cfg.behaviours) + (RELABELLED,)
+    return replace(run, data=join_frames(run.data, frames), train_cfg=replace(run.train_cfg, behaviours=behaviours))
 
 
 if __name__ == "__main__":

@@ -746,3 +746,45 @@ def test_the_report_shows_each_hand_drawn_map():
     lines = drawn_lines(episodes).splitlines()
     assert len(lines) == 3 and lines[2] == "| `spiral_9x9` | 1.000 | 0.500 | 1.08 |"
     assert drawn_lines(episodes[episodes.split != "drawn"]) == ""
+
+
+def test_the_learners_own_states_are_labelled_with_the_controllers_way_to_its_sub_goal():
+    """DAgger's data (hnsdt.data.relabel): an untrained HNSDT acts on two maze layouts (so it strays); every
+    frame is a state it visited, as a view, with the sub-goal it pursued, and an action that the controller would
+    take there: a move one step closer to the sub-goal's target, or pick/open on it. Joined after the dataset's
+    frames, its episodes are numbered after theirs."""
+    import torch
+
+    from hnsdt.agents.executor import ExecutorConfig
+    from hnsdt.agents.navigation import Navigator
+    from hnsdt.data.relabel import RELABELLED, join_frames, learner_frames
+    from hnsdt.envs.generate import generate
+    from hnsdt.envs.keydoor import PICK
+    from hnsdt.envs.observation import view_states
+
+    torch.manual_seed(0)
+    model = _view_network("hnsdt", 2).eval()
+    layouts = [generate("keydoor_maze", 0), generate("keydoor_maze", 1)]
+    frames = learner_frames(model, "hnsdt", {}, layouts, ExecutorConfig(), 2, 30, [0.0, 0.2], 4, seed=3)
+    assert (frames.policy == RELABELLED).all() and frames.episode.max() + 1 == 8
+    assert (frames.timestep[frames.episode_start == np.arange(len(frames))] == 0).all()
+    checked = 0
+    for e in range(8):
+        rows = np.flatnonzero(frames.episode == e)
+        layout = layouts[e // 4]
+        flags = frames.states[rows][:, 2 + 25:]
+        raw = np.concatenate([frames.states[rows][:, :2], flags], axis=1)
+        assert (view_states(layout, raw, 2) == frames.states[rows]).all()  # the view of the visited state
+        nav = Navigator(layout)
+        go = frames.subgoals[rows] != 0
+        cells, targets, actions = raw[go, :2], frames.targets[rows][go], frames.actions[rows][go]
+        masks = raw[go][:, layout.door_flags] @ (1 << np.arange(len(layout.doors)))
+        idx = nav.target_grid[targets[:, 0], targets[:, 1]]
+        on_target = (cells == targets).all(axis=1)
+        closer = nav.on_shortest_path(idx, masks, cells, actions)
+        assert (np.where(on_target, actions == PICK, closer)).all()
+        checked += go.sum()
+    assert checked > 100
+    joined = join_frames(frames, frames)
+    assert len(joined) == 2 * len(frames) and joined.episode.max() + 1 == 16
+    assert (joined.actions[len(frames):] == frames.actions).all()
