@@ -90,6 +90,7 @@ def main() -> None:
             runs = gen.plan_runs(params, method, dataset)
             train_all(runs, g["family"], tmp / "models" / method, tmp / "curves" / method, compute, progress=False)
             times[f"train {method}"] = time.perf_counter() - t0
+            validation += validation_lines(tmp / "models" / method, method, g["seeds"], "")
             for r in range(args.relabel_rounds if args.relabel and runs[0].model_cfg.condition == "subgoal" else 0):
                 t0 = time.perf_counter()
                 runs = [relabelled_run(params, run, tmp / "models" / method, args.relabel) for run in runs]
@@ -98,11 +99,7 @@ def main() -> None:
                 train_all(runs, g["family"], tmp / "models" / method, tmp / "curves" / method, compute,
                           progress=False)
                 times[f"train {method} round {r + 1}"] = time.perf_counter() - t0
-            for seed in g["seeds"]:  # the budget's measure on the validation layouts (choices are made on it)
-                usage = load_checkpoint(tmp / "models" / method / f"seed{seed}")[1].get("usage", {})
-                if usage.get("validation_steps"):
-                    best = min(usage["validation_steps"], key=lambda h: h["value"])
-                    validation.append(f"{method} seed {seed}: {best['value']:.2f} steps at epoch {best['epoch']}")
+                validation += validation_lines(tmp / "models" / method, method, g["seeds"], f" (relabel round {r + 1})")
         t0 = time.perf_counter()
         gen.evaluate(params, tmp / "models", tmp / "results", compute, progress=False)
         times["evaluate"] = time.perf_counter() - t0
@@ -122,6 +119,17 @@ def main() -> None:
         print(f"\nvalidation layouts ({g['validation_layouts']} of {families}), mean steps to the exit at fail_prob 0 "
               "of the epoch kept: " + "; ".join(validation))
     print("\n" + ", ".join(f"{k} {v:.0f} s" for k, v in times.items()) + f"; total {sum(times.values()):.0f} s")
+
+
+def validation_lines(models: Path, method: str, seeds: list[int], label: str) -> list[str]:
+    """Each seed's budget measure on the validation layouts at the epoch kept (choices are made on it)."""
+    lines = []
+    for seed in seeds:
+        usage = load_checkpoint(models / f"seed{seed}")[1].get("usage", {})
+        if usage.get("validation_steps"):
+            best = min(usage["validation_steps"], key=lambda h: h["value"])
+            lines.append(f"{method}{label} seed {seed}: {best['value']:.2f} steps at epoch {best['epoch']}")
+    return lines
 
 
 def relabelled_run(params, run, models: Path, episodes: int):
