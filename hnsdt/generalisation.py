@@ -114,7 +114,7 @@ def layout_splits(params: Params, evaluated_only: bool = False) -> list[Source]:
     out = train[:g.evaluated_train_layouts] if evaluated_only else list(train)
     out += _unseen(params, "heldout", HELDOUT_SEED, g.heldout_layouts, train)
     for src in g.minigrid:
-        out += [Source("minigrid", from_minigrid(src.id, s), src.max_steps) for s in range(src.layouts)]
+        out += [Source(src.split, from_minigrid(src.id, s), src.max_steps) for s in range(src.layouts)]
     if g.drawn is not None:
         out += drawn_layouts(g.drawn.folder, g.drawn.max_steps)
     return out

@@ -149,6 +149,9 @@ class MiniGridSource(Section):
     id: str = Field(description="a MiniGrid DoorKey id, e.g. MiniGrid-DoorKey-8x8-v0")
     layouts: PositiveInt = Field(description="its grids of seeds 0..layouts-1")
     max_steps: PositiveInt = Field(description="episode step limit on these grids")
+    split: str = Field("minigrid", pattern=r"^minigrid(_[0-9a-z]+)?$",
+                       description="the split's name in the tables: minigrid (in the headline) or minigrid_<name>, "
+                                   "e.g. minigrid_16x16 for another size beside it")
 
 
 class DrawnSource(Section):

@@ -544,6 +544,10 @@ def test_a_bad_generalisation_knob_is_one_line_naming_it(tmp_path):
     params["generalisation"].update(family="keydoor", methods=["hnsdt", "hnsdt"])
     with pytest.raises(ValueError, match="generalisation.methods: must not repeat"):
         validate(params)
+    params["generalisation"].update(methods=["hnsdt"], minigrid=[{"id": "MiniGrid-DoorKey-8x8-v0", "layouts": 1,
+                                                                 "max_steps": 100, "split": "heldout"}])
+    with pytest.raises(ValueError, match=r"generalisation.minigrid.0.split: String should match pattern"):
+        validate(params)
 
 
 def test_a_methods_budget_replaces_the_protocols_knobs_and_a_bad_one_is_named(tmp_path):
@@ -616,7 +620,7 @@ def test_no_two_splits_share_a_map_and_validation_is_never_evaluated():
     g = params.generalisation
     assert len(validation) == g.validation_layouts * len(g.validation_families) > 0  # each family's
     assert {s.split for s in validation} == {"validation"}
-    assert {s.split for s in evaluated} == {"train", "heldout", "minigrid", "drawn"}
+    assert {s.split for s in evaluated} == {"train", "heldout", "minigrid", "minigrid_16x16", "drawn"}
     texts = [s.layout.text for s in evaluated + validation]
     assert len(set(texts)) == len(texts)
     first = generate(g.family, gen.VALIDATION_SEED)

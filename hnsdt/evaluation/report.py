@@ -583,7 +583,7 @@ def theorem_sections(params: Params, results: Path, summ: pd.DataFrame, episodes
 
 
 SPLIT_LABELS = {"train": "training layouts", "heldout": "held-out layouts", "minigrid": "MiniGrid grids",
-                "drawn": "hand-drawn maps"}
+                "minigrid_16x16": "MiniGrid 16 × 16 grids", "drawn": "hand-drawn maps"}
 TARGET_SUCCESS, TARGET_STEPS = 0.95, 1.10  # HNSDT on maps it never saw: of the optimum's success, its steps
 
 
