@@ -210,11 +210,11 @@ class BaselineSettings:
 
 
 def baseline_settings(params: Params, method: str, env: str | EnvSpec, seed: int,
-                      env_steps: int | None = None) -> BaselineSettings:
+                      env_steps: tuple[str, object] | None = None) -> BaselineSettings:
     """The knobs of ``baselines.<method>`` on one env and seed; unknown keys and wrongly typed values are
     errors. ``env``: a key of ``envs``, or the spec of a generated family (the unseen-layout experiment: a
-    per-env budget is then looked up under the family's name, unless ``env_steps``, a budget of its own,
-    replaces it)."""
+    per-env budget is then looked up under the family's name, unless ``env_steps`` — the key that sets a
+    budget of its own, and its value — replaces it)."""
     from hnsdt.models.train import pick_device
 
     if method not in BASELINES:
@@ -239,11 +239,12 @@ def baseline_settings(params: Params, method: str, env: str | EnvSpec, seed: int
             raise params.error(f"{key}.behaviours must be a list drawn from {POLICIES}, got {behaviours!r}")
         train_fixed["behaviours"] = tuple(behaviours)
     if "env_steps" in train_fields:  # online: a budget of environment steps, one number or one per env
-        budget = section.get("env_steps") if env_steps is None else env_steps
-        if isinstance(budget, dict):
+        where, budget = (f"{key}.env_steps", section.get("env_steps")) if env_steps is None else env_steps
+        if env_steps is None and isinstance(budget, dict):
             budget = budget.get(env.name)
         if not isinstance(budget, int) or isinstance(budget, bool) or budget < 1:
-            raise params.error(f"{key}.env_steps must be a positive integer or a mapping env -> one "
+            raise params.error(f"{where} must be a positive integer, got {env_steps[1]!r}" if env_steps else
+                               f"{where} must be a positive integer or a mapping env -> one "
                                f"(missing or bad for {env.name!r}: {section.get('env_steps')!r})")
         train_fixed["env_steps"] = budget
     if "fail_probs" in train_fields and "fail_probs" in section:

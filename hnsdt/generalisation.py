@@ -214,10 +214,9 @@ def network_configs(params: Params, method: str, seed: int):
         elif ts.measure.get(method, ("loss",))[0] != "loss":  # acting from held-out states needs one fixed map:
             train_cfg = replace(train_cfg, validation=0.0, epochs=ts.config.epochs)  # here, train.epochs
         return cfg, _budget(params, method, train_cfg)
-    steps = g.budgets.get(method, {}).get("env_steps")  # (any family, whatever baselines.<method> maps)
-    if steps is not None and (not isinstance(steps, int) or isinstance(steps, bool) or steps < 1):
-        raise params.error(f"generalisation.budgets.{method}.env_steps must be a positive integer, got {steps!r}")
-    bs = baseline_settings(params, method, env, seed, env_steps=steps)
+    budget = g.budgets.get(method, {})  # its env_steps stand in for any family, whatever baselines.<method> maps
+    own = (f"generalisation.budgets.{method}.env_steps", budget["env_steps"]) if "env_steps" in budget else None
+    bs = baseline_settings(params, method, env, seed, env_steps=own)
     return view_cls(**asdict(bs.model), view_radius=g.view_radius), _budget(params, method, bs.train)
 
 

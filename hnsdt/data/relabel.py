@@ -60,11 +60,7 @@ def learner_frames(model, method: str, facts: dict, layouts: list, executor: Exe
 def join_frames(first: Frames, second: Frames) -> Frames:
     """``first``'s frames, then ``second``'s, its episodes numbered after ``first``'s."""
     offset = int(first.episode.max()) + 1 if len(first) else 0
-    return frames_from_arrays(np.concatenate([first.states, second.states]),
-                              np.concatenate([first.actions, second.actions]),
-                              np.concatenate([first.rewards, second.rewards]),
-                              np.concatenate([first.subgoals, second.subgoals]),
-                              np.concatenate([first.targets, second.targets]),
-                              np.concatenate([first.episode, second.episode + offset]),
-                              np.concatenate([first.timestep, second.timestep]),
-                              np.concatenate([first.policy, second.policy]))
+    inputs = ("states", "actions", "rewards", "subgoals", "targets", "episode", "timestep", "policy")
+    both = {f: np.concatenate([getattr(first, f), getattr(second, f)]) for f in inputs}
+    both["episode"][len(first):] += offset
+    return frames_from_arrays(*(both[f] for f in inputs))  # (episode starts and returns-to-go derived again)
