@@ -12,11 +12,17 @@ Run: python benchmarks/generalisation.py [--family multikeydoor] [--train-layout
 training family on one validation split of three shapes, with one step limit. `--relabel N` adds rounds of the
 learner's own states labelled by the planner (hnsdt.data.relabel, DAgger): after a decision transformer with a
 sub-goal token trains, it acts N episodes per training layout, each step is labelled with the controller's
-action, and it trains again on the dataset plus those frames; `--relabel-rounds R` repeats it R times.)
+action, and it trains again on the dataset plus those frames; `--relabel-rounds R` repeats it R times.
+`--record NAME --ingredient I` adds the run's table to benchmarks/results/generalisation.csv as the variant NAME
+(hnsdt.evaluation.ablations: the report's ablation table and scaling figure), with the command, revision and
+digests that made it.)
 """
 
 import argparse
 import copy
+import hashlib
+import shlex
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -31,6 +37,7 @@ pin_process()
 from hnsdt import generalisation as gen  # noqa: E402
 from hnsdt.config import compute_settings, load_params  # noqa: E402
 from hnsdt.params import validate  # noqa: E402
+from hnsdt.evaluation import ablations  # noqa: E402
 from hnsdt.evaluation.report import SPLIT_LABELS, drawn_lines, generalisation_table  # noqa: E402
 from hnsdt.models.checkpoint import load_checkpoint  # noqa: E402
 from hnsdt.training import train_all  # noqa: E402
@@ -54,7 +61,12 @@ def main() -> None:
     ap.add_argument("--relabel", type=int, default=0, metavar="N",
                     help="learner episodes per training layout labelled by the planner, then train again (DAgger)")
     ap.add_argument("--relabel-rounds", type=int, default=1, metavar="R")
+    ap.add_argument("--record", metavar="NAME", help="add the results to --results as the variant NAME")
+    ap.add_argument("--ingredient", choices=ablations.INGREDIENTS, help="what --record's variant changes")
+    ap.add_argument("--results", type=Path, default=Path("benchmarks/results/generalisation.csv"))
     args = ap.parse_args()
+    if bool(args.record) != bool(args.ingredient):
+        ap.error("--record and --ingredient go together")
     raw = copy.deepcopy(load_params(args.params).raw)
     g = raw["generalisation"]
     if args.family:
@@ -79,7 +91,7 @@ def main() -> None:
     g["evaluated_train_layouts"] = min(g["evaluated_train_layouts"], g["train_layouts"])
     params = validate(raw, f"{args.params} with the command line's changes")
     compute = compute_settings(params)
-    times, validation = {}, []
+    times, validation, best, rounds = {}, [], {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         t0 = time.perf_counter()
@@ -91,7 +103,9 @@ def main() -> None:
             train_all(runs, g["family"], tmp / "models" / method, tmp / "curves" / method, compute, progress=False)
             times[f"train {method}"] = time.perf_counter() - t0
             validation += validation_lines(tmp / "models" / method, method, g["seeds"], "")
-            for r in range(args.relabel_rounds if args.relabel and runs[0].model_cfg.condition == "subgoal" else 0):
+            best[method] = mean_validation(tmp / "models" / method, g["seeds"])
+            rounds[method] = args.relabel_rounds if args.relabel and runs[0].model_cfg.condition == "subgoal" else 0
+            for r in range(rounds[method]):
                 t0 = time.perf_counter()
                 runs = [relabelled_run(params, run, tmp / "models" / method, args.relabel) for run in runs]
                 times[f"relabel {method} round {r + 1}"] = time.perf_counter() - t0
@@ -100,11 +114,15 @@ def main() -> None:
                           progress=False)
                 times[f"train {method} round {r + 1}"] = time.perf_counter() - t0
                 validation += validation_lines(tmp / "models" / method, method, g["seeds"], f" (relabel round {r + 1})")
+                best[method] = mean_validation(tmp / "models" / method, g["seeds"])
         t0 = time.perf_counter()
         gen.evaluate(params, tmp / "models", tmp / "results", compute, progress=False)
         times["evaluate"] = time.perf_counter() - t0
         table = generalisation_table(pd.read_csv(tmp / "results/summary.csv"))
         per_map = drawn_lines(pd.read_csv(tmp / "results/episodes.csv"))
+        if args.record:
+            rows = variant_rows(args, params, table, best, rounds, folder_digest(tmp / "dataset"), sum(times.values()))
+            ablations.record(args.results, rows)
     print(f"\n{g['family']}: {g['train_layouts']} training layouts ({g['evaluated_train_layouts']} evaluated), "
           f"{g['heldout_layouts']} held-out, MiniGrid {[(m['id'], m['layouts']) for m in g['minigrid']]}; seeds "
           f"{g['seeds']}, {g['episodes']} episodes per layout and fail_prob, budgets {g.get('budgets', {})}\n")
@@ -119,6 +137,8 @@ def main() -> None:
         print(f"\nvalidation layouts ({g['validation_layouts']} of {families}), mean steps to the exit at fail_prob 0 "
               "of the epoch kept: " + "; ".join(validation))
     print("\n" + ", ".join(f"{k} {v:.0f} s" for k, v in times.items()) + f"; total {sum(times.values()):.0f} s")
+    if args.record:
+        print(f"recorded variant {args.record!r} ({args.ingredient}) in {args.results}")
 
 
 def validation_lines(models: Path, method: str, seeds: list[int], label: str) -> list[str]:
@@ -130,6 +150,52 @@ def validation_lines(models: Path, method: str, seeds: list[int], label: str) ->
             best = min(usage["validation_steps"], key=lambda h: h["value"])
             lines.append(f"{method}{label} seed {seed}: {best['value']:.2f} steps at epoch {best['epoch']}")
     return lines
+
+
+def mean_validation(models: Path, seeds: list[int]) -> float:
+    """The mean over seeds of the budget measure at the epoch kept (NaN for a method trained without it)."""
+    values = []
+    for seed in seeds:
+        usage = load_checkpoint(models / f"seed{seed}")[1].get("usage", {})
+        if usage.get("validation_steps"):
+            values.append(min(h["value"] for h in usage["validation_steps"]))
+    return sum(values) / len(values) if values else float("nan")
+
+
+def folder_digest(folder: Path) -> str:
+    """16 hex digits of the sha256 over a folder's files (relative path and bytes, in path order)."""
+    h = hashlib.sha256()
+    for f in sorted(p for p in folder.rglob("*") if p.is_file()):
+        h.update(f.relative_to(folder).as_posix().encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def cpu_name() -> str:
+    """The CPU's model name and whether it has AVX-512 (stage times differ 2-3x between such machines)."""
+    try:
+        info = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return "unknown"
+    model = next((line.split(":", 1)[1].strip() for line in info.splitlines() if line.startswith("model name")), "?")
+    return f"{model}, {len([line for line in info.splitlines() if line.startswith('processor')])} cores" + (
+        ", AVX-512" if "avx512f" in info else ", no AVX-512")
+
+
+def variant_rows(args, params, table: pd.DataFrame, best: dict, rounds: dict, dataset_digest: str, seconds: float) -> pd.DataFrame:
+    """The benchmark's table as rows of hnsdt.evaluation.ablations' file."""
+    from hnsdt.provenance import git_revision, params_digest
+
+    g = params.generalisation
+    side = 2 * g.view_radius + 1
+    encoder = f"{side}×{side} " + (f"+ VI {g.value_iterations}" if g.value_iterations else
+                                   f"+ {g.conv_layers} conv" if g.conv_layers else "flattened")
+    return table.assign(
+        variant=args.record, ingredient=args.ingredient, family=g.family, train_layouts=g.train_layouts,
+        episodes_per_map=2 * g.episodes_per_layout + g.random_episodes_per_layout, encoder=encoder,
+        relabel_rounds=table.method.map(rounds).fillna(0).astype(int), seeds=" ".join(map(str, g.seeds)),
+        validation_steps=table.method.map(best), command=shlex.join(["python", *sys.argv]),
+        revision=git_revision(), params_digest=params_digest(params), dataset_digest=dataset_digest,
+        cpu=cpu_name(), seconds=round(seconds))
 
 
 def relabelled_run(params, run, models: Path, episodes: int):
