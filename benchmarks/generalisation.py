@@ -10,9 +10,10 @@ Run: python benchmarks/generalisation.py [--family multikeydoor] [--train-layout
 (`--set` takes a `generalisation` key as YAML, e.g. `--set max_steps=250 --set 'budgets={gru: {epochs: 20}}'`;
 `--set 'validation_families=[keydoor, keydoor_maze, keydoor_obstacles]' --set max_steps=150` measures every
 training family on one validation split of three shapes, with one step limit. `--relabel N` adds rounds of the
-learner's own states labelled by the planner (hnsdt.data.relabel, DAgger): after a decision transformer with a
-sub-goal token trains, it acts N episodes per training layout, each step is labelled with the controller's
-action, and it trains again on the dataset plus those frames; `--relabel-rounds R` repeats it R times.
+learner's own states labelled by the planner (hnsdt.data.relabel, DAgger): after a decision transformer
+trains, it acts N episodes per training layout, each step is labelled with the controller's action (towards
+HNSDT's own sub-goal; for the pure DT, the planner's first from that state), and it trains again on the dataset
+plus those frames; `--relabel-rounds R` repeats it R times.
 `--record NAME --ingredient I` adds the run's table to benchmarks/results/generalisation.csv as the variant NAME
 (hnsdt.evaluation.ablations: the report's ablation table and scaling figure), with the command, revision and
 digests that made it.)
@@ -38,6 +39,7 @@ from hnsdt import generalisation as gen  # noqa: E402
 from hnsdt.config import compute_settings, load_params  # noqa: E402
 from hnsdt.params import validate  # noqa: E402
 from hnsdt.evaluation import ablations  # noqa: E402
+from hnsdt.methods import DT_METHODS  # noqa: E402
 from hnsdt.evaluation.report import SPLIT_LABELS, drawn_lines, generalisation_table  # noqa: E402
 from hnsdt.models.checkpoint import load_checkpoint  # noqa: E402
 from hnsdt.training import train_all  # noqa: E402
@@ -77,8 +79,6 @@ def main() -> None:
         if value is not None:
             g[key] = value
     if args.methods:  # split like params.yaml: decision transformers, then the other learned methods
-        from hnsdt.methods import DT_METHODS
-
         g["methods"] = [m for m in args.methods if m in DT_METHODS]
         g["baselines"] = [m for m in args.methods if m not in DT_METHODS]
     if args.no_minigrid or args.family == "multikeydoor":
@@ -104,7 +104,7 @@ def main() -> None:
             times[f"train {method}"] = time.perf_counter() - t0
             validation += validation_lines(tmp / "models" / method, method, g["seeds"], "")
             best[method] = mean_validation(tmp / "models" / method, g["seeds"])
-            rounds[method] = args.relabel_rounds if args.relabel and runs[0].model_cfg.condition == "subgoal" else 0
+            rounds[method] = args.relabel_rounds if args.relabel and method in DT_METHODS else 0
             for r in range(rounds[method]):
                 t0 = time.perf_counter()
                 runs = [relabelled_run(params, run, tmp / "models" / method, args.relabel) for run in runs]

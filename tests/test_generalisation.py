@@ -752,14 +752,16 @@ def test_the_report_shows_each_hand_drawn_map():
     assert drawn_lines(episodes[episodes.split != "drawn"]) == ""
 
 
-def test_the_learners_own_states_are_labelled_with_the_controllers_way_to_its_sub_goal():
-    """DAgger's data (hnsdt.data.relabel): an untrained HNSDT acts on two maze layouts (so it strays); every
-    frame is a state it visited, as a view, with the sub-goal it pursued, and an action that the controller would
-    take there: a move one step closer to the sub-goal's target, or pick/open on it. Joined after the dataset's
-    frames, its episodes are numbered after theirs."""
+@pytest.mark.parametrize("method", ["hnsdt", "pure_dt"])
+def test_the_learners_own_states_are_labelled_with_the_controllers_way_to_its_sub_goal(method):
+    """DAgger's data (hnsdt.data.relabel): an untrained HNSDT (or pure DT) acts on two maze layouts (so it
+    strays); every frame is a state it visited, as a view, with the sub-goal it pursued (the pure DT, which has no
+    planner: the planner's first sub-goal from that state), and an action that the controller would take there:
+    a move one step closer to the sub-goal's target, or pick/open on it. Joined after the dataset's frames, its
+    episodes are numbered after theirs."""
     import torch
 
-    from hnsdt.agents.executor import ExecutorConfig
+    from hnsdt.agents.executor import ExecutorConfig, PlanExecutor
     from hnsdt.agents.navigation import Navigator
     from hnsdt.data.relabel import RELABELLED, join_frames, learner_frames
     from hnsdt.envs.generate import generate
@@ -767,9 +769,10 @@ def test_the_learners_own_states_are_labelled_with_the_controllers_way_to_its_su
     from hnsdt.envs.observation import view_states
 
     torch.manual_seed(0)
-    model = _view_network("hnsdt", 2).eval()
+    model = _view_network(method, 2).eval()
     layouts = [generate("keydoor_maze", 0), generate("keydoor_maze", 1)]
-    frames = learner_frames(model, "hnsdt", {}, layouts, ExecutorConfig(), 2, 30, [0.0, 0.2], 4, seed=3)
+    meta = {"target_return": 1.0}  # (the pure DT's return-to-go: its checkpoint's, in a trained run)
+    frames = learner_frames(model, method, meta, layouts, ExecutorConfig(), 2, 30, [0.0, 0.2], 4, seed=3)
     assert (frames.policy == RELABELLED).all() and frames.episode.max() + 1 == 8
     assert (frames.timestep[frames.episode_start == np.arange(len(frames))] == 0).all()
     checked = 0
@@ -787,6 +790,10 @@ def test_the_learners_own_states_are_labelled_with_the_controllers_way_to_its_su
         on_target = (cells == targets).all(axis=1)
         closer = nav.on_shortest_path(idx, masks, cells, actions)
         assert (np.where(on_target, actions == PICK, closer)).all()
+        if method == "pure_dt":  # the planner's first sub-goal from each visited state
+            first = [PlanExecutor(layout, ExecutorConfig()).start(s).subgoal for s in raw]
+            assert (frames.subgoals[rows] == [g.id for g in first]).all()
+            assert (frames.targets[rows] == np.array([g.target for g in first]).reshape(-1, 2)).all()
         checked += go.sum()
     assert checked > 100
     joined = join_frames(frames, frames)

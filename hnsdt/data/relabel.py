@@ -1,7 +1,9 @@
 """The learner's own states, labelled by the planner (DAgger, Ross et al. 2011): a trained executor acts on the
 training layouts, and each step it took is labelled with the action the hand-written controller would have taken
 there towards the same sub-goal — so the next training round sees the states the learner's own mistakes lead to,
-with the way back out of them. One round: collect with the trained model, add the frames, train again.
+with the way back out of them. One round: collect with the trained model, add the frames, train again. A learner
+without a planner (the pure DT) is labelled with the planner's first sub-goal from each state it visited: the
+symbolic baseline's action there.
 
 Simplification, named: a relabelled episode's actions are the controller's, also where they are read as the
 previous action of the next step's token; the states are the ones the learner's own actions led to.
@@ -11,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hnsdt.agents.executor import ExecutorConfig
+from hnsdt.agents.executor import ExecutorConfig, PlanExecutor
 from hnsdt.agents.rollout import rollout
 from hnsdt.agents.symbolic import SymbolicAgent
 from hnsdt.data.collect import random_start_states
@@ -28,7 +30,8 @@ def learner_frames(model, method: str, facts: dict, layouts: list, executor: Exe
                    max_steps: int, fail_probs: list[float], episodes: int, seed: int) -> Frames:
     """``episodes`` episodes of ``method``'s trained ``model`` on each layout (half from its start, half from
     random states; spread over ``fail_probs``), as view frames whose actions are the controller's towards each
-    step's sub-goal (the planner's operator the learner was executing). Seeded by ``seed``."""
+    step's sub-goal (the planner's operator the learner was executing; for a learner without a planner, the
+    planner's first operator from that step's state). Seeded by ``seed``."""
     arrays: dict[str, list] = {k: [] for k in ("states", "actions", "rewards", "ids", "targets", "episode", "t")}
     make_agent = resolve(METHODS[method].agent)
     n_episodes = 0
@@ -42,19 +45,29 @@ def learner_frames(model, method: str, facts: dict, layouts: list, executor: Exe
             starts = np.vstack([Rules(layout).initial_states(n - n // 2),
                                 random_start_states(layout, n // 2, np.random.default_rng(batch_seed))])
             env = KeyDoorVectorEnv(n, layout, fail_prob, max_steps)
-            for ep in rollout(env, make_agent(model, facts, layout, executor), batch_seed, starts):
+            agent = make_agent(model, facts, layout, executor)
+            for ep in rollout(env, agent, batch_seed, starts):
                 T = ep.length
+                ids, targets = ((ep.subgoal_ids, ep.subgoal_targets) if hasattr(agent, "executors")
+                                else planner_subgoals(layout, executor, ep.states[:T]))
                 arrays["states"].append(view_states(layout, ep.states[:T], view_radius))
-                arrays["actions"].append(expert.low_level(ep.states[:T], ep.subgoal_ids, ep.subgoal_targets))
+                arrays["actions"].append(expert.low_level(ep.states[:T], ids, targets))
                 arrays["rewards"].append(ep.rewards)
-                arrays["ids"].append(ep.subgoal_ids)
-                arrays["targets"].append(ep.subgoal_targets)
+                arrays["ids"].append(ids)
+                arrays["targets"].append(targets)
                 arrays["episode"].append(np.full(T, n_episodes))
                 arrays["t"].append(np.arange(T))
                 n_episodes += 1
     cat = {k: np.concatenate(v) for k, v in arrays.items()}
     return frames_from_arrays(cat["states"], cat["actions"], cat["rewards"], cat["ids"], cat["targets"],
                               cat["episode"], cat["t"], [RELABELLED] * len(cat["t"]))
+
+
+def planner_subgoals(layout, executor: ExecutorConfig, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The sub-goal id (T,) and target (T, 2) of the planner's first operator from each state."""
+    goals = [PlanExecutor(layout, executor).start(s).subgoal for s in states]
+    return (np.array([g.id for g in goals], dtype=np.int64),
+            np.array([g.target for g in goals], dtype=np.int64).reshape(-1, 2))
 
 
 def join_frames(first: Frames, second: Frames) -> Frames:
