@@ -132,7 +132,8 @@ def cmd_report(args) -> None:
 
     stages.report(load_params(args.params), Path(args.results), Path(args.out),
                   generalisation=Path(args.generalisation) if args.generalisation else None,
-                  headline=Path(args.headline) if args.headline else None)
+                  headline=Path(args.headline) if args.headline else None,
+                  ablations=Path(args.ablations) if args.ablations else None)
 
 
 def cmd_replay(args) -> None:
@@ -329,6 +330,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="report")
     p.add_argument("--headline", help="also write the headline metrics (success per method and split, HNSDT's "
                    "steps / optimum) as JSON here, e.g. metrics/headline.json")
+    p.add_argument("--ablations", help="measured variants of the unseen-layout experiment (e.g. "
+                   "benchmarks/results/generalisation.csv, written by benchmarks/generalisation.py --record): "
+                   "the report's ablation table and scaling figure")
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("replay", help="find or render the recording of an episode (.rrd for rerun, .mcap for "

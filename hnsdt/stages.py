@@ -80,11 +80,11 @@ def evaluate(params: Params, models: Path, datasets: Path, out: Path, recordings
 
 
 def report(params: Params, results: Path, out: Path, generalisation: Path | None = None,
-           headline: Path | None = None) -> Path:
+           headline: Path | None = None, ablations: Path | None = None) -> Path:
     """Stage `report`: figures and report.md, and the headline metrics (``headline``)."""
     from hnsdt.evaluation.report import write_report
 
-    path = write_report(params, results, out, generalisation=generalisation, headline=headline)
+    path = write_report(params, results, out, generalisation=generalisation, headline=headline, ablations=ablations)
     print(f"wrote {path}")
     return path
 

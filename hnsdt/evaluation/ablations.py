@@ -38,21 +38,20 @@ def read(path: str | Path) -> pd.DataFrame:
 
 
 def record(path: str | Path, rows: pd.DataFrame) -> None:
-    """Add one variant's rows to the file at ``path`` (written whole, atomically), replacing the rows of a
-    variant of the same name in place; other variants keep their order."""
+    """Add one variant's rows to the file at ``path`` (written whole, atomically): a method measured again
+    replaces its rows of that variant, another method joins them (so a variant's methods may be measured one run
+    at a time); the variants keep their order."""
     if rows.variant.nunique() != 1:
         raise ValueError("record() takes the rows of one variant")
     if rows.ingredient.iloc[0] not in INGREDIENTS:
         raise ValueError(f"unknown ingredient {rows.ingredient.iloc[0]!r}; expected one of {', '.join(INGREDIENTS)}")
     path = Path(path)
-    name = rows.variant.iloc[0]
     old = read(path) if path.is_file() else pd.DataFrame(columns=COLUMNS)
-    if name in set(old.variant):
-        at = int(np.flatnonzero(old.variant.to_numpy() == name)[0])
-        kept = old[old.variant != name]
-        new = pd.concat([kept.iloc[:at], rows[COLUMNS], kept.iloc[at:]], ignore_index=True)
-    else:
-        new = pd.concat([old, rows[COLUMNS]], ignore_index=True) if len(old) else rows[COLUMNS]
+    measured = set(zip(rows.variant, rows.method))
+    kept = old[[key not in measured for key in zip(old.variant, old.method)]]
+    new = pd.concat([kept, rows[COLUMNS]], ignore_index=True) if len(kept) else rows[COLUMNS].reset_index(drop=True)
+    order = list(dict.fromkeys([*old.variant, rows.variant.iloc[0]]))
+    new = new.iloc[np.argsort([order.index(v) for v in new.variant], kind="stable")]
     with atomic_file(path) as tmp:
         new.to_csv(tmp, index=False, float_format="%.4f")
 
@@ -65,3 +64,98 @@ def scaling_points(rows: pd.DataFrame) -> pd.DataFrame:
         return rows.iloc[:0]
     same = (rows.encoder == ref.encoder.iloc[0]) & (rows.family == ref.family.iloc[0]) & (rows.relabel_rounds == 0)
     return rows[rows.ingredient.isin(["reference", "maps"]) & same].sort_values("train_layouts", kind="stable")
+
+
+SPLITS = {"heldout": "held-out", "minigrid": "MiniGrid 8×8", "minigrid_16x16": "MiniGrid 16×16", "drawn": "hand-drawn"}
+
+
+def _cell(success: float, ratio: float) -> str:
+    if pd.isna(success):
+        return "–"
+    return f"{success:.3f}" + ("" if pd.isna(ratio) else f" ({ratio:.2f}×)")
+
+
+def ablation_table(rows: pd.DataFrame) -> str:
+    """Markdown: per variant and method, the validation measure and success (steps / optimum) on each unseen
+    split, with the revision that measured it."""
+    from hnsdt.methods import METHODS, PROPOSED
+
+    splits = [s for s in SPLITS if s in set(rows.split)]
+    lines = ["| variant | changes | training maps × episodes | encoder | seeds | method | validation steps | "
+             + " | ".join(SPLITS[s] for s in splits) + " | revision |",
+             "|---" * (8 + len(splits)) + "|"]
+    rank = {m: i for i, m in enumerate(dict.fromkeys([PROPOSED, *METHODS]))}  # HNSDT first, then the paper's order
+    keys = sorted(dict.fromkeys(zip(rows.variant, rows.method)),
+                  key=lambda k: (list(dict.fromkeys(rows.variant)).index(k[0]), rank.get(k[1], len(rank))))
+    for variant, method in keys:
+        d = rows[(rows.variant == variant) & (rows.method == method)]
+        r, by = d.iloc[0], d.set_index("split")
+        cells = " | ".join(_cell(by.success.get(s), by.steps_ratio.get(s)) for s in splits)
+        relabel = f", {r.relabel_rounds} relabelled round(s)" if r.relabel_rounds else ""
+        validation = "–" if pd.isna(r.validation_steps) else f"{r.validation_steps:.1f}"
+        lines.append(f"| {variant} | {r.ingredient} | {r.train_layouts:,} × {r.episodes_per_map} `{r.family}`{relabel} "
+                     f"| {r.encoder} | {r.seeds} | {METHODS[method].label if method in METHODS else method} | "
+                     f"{validation} | {cells} | `{r.revision}` |")
+    return "\n".join(lines)
+
+
+def scaling_figure(rows: pd.DataFrame, path: Path) -> bool:
+    """Held-out and hand-drawn steps / optimum (left) and success (right) against the number of training maps,
+    one line per method and split, each point labelled with its episodes per map. False (no figure) when fewer
+    than two map counts were measured."""
+    points = scaling_points(rows)
+    if points.train_layouts.nunique() < 2:
+        return False
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hnsdt.methods import METHODS
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for (method, split), d in points[points.split.isin(["heldout", "drawn"])].groupby(["method", "split"], sort=False):
+        d = d.groupby("train_layouts", as_index=False).agg(
+            steps_ratio=("steps_ratio", "mean"), success=("success", "mean"), eps=("episodes_per_map", "first"))
+        style = {"marker": "o" if split == "heldout" else "s", "linestyle": "-" if split == "heldout" else "--"}
+        label = f"{METHODS[method].label if method in METHODS else method}, {SPLITS[split]}"
+        for ax, column in zip(axes, ("steps_ratio", "success")):
+            line, = ax.plot(d.train_layouts, d[column], label=label, **style)
+            if column == "steps_ratio":
+                for x, y, eps in zip(d.train_layouts, d[column], d.eps):
+                    ax.annotate(f"{eps}/map", (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7,
+                                color=line.get_color())
+    counts = sorted(set(points.train_layouts))
+    for ax, title in zip(axes, ("steps / optimum (successful episodes)", "success rate")):
+        ax.set_xscale("log")
+        ax.set_xticks(counts, [f"{c:,}" for c in counts])
+        ax.minorticks_off()
+        ax.set_xlim(counts[0] / 1.5, counts[-1] * 1.5)
+        ax.set_xlabel("training maps")
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+    axes[0].axhline(1.10, color="k", lw=0.8, ls=":")
+    axes[1].axhline(0.95, color="k", lw=0.8, ls=":")
+    axes[1].set_ylim(0, 1.05)
+    axes[1].legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
+
+
+def learned(rows: pd.DataFrame) -> pd.DataFrame:
+    """The rows of methods that learn (the planner with hand-written controllers is the same in every variant)."""
+    from hnsdt.methods import METHODS
+
+    return rows[[m not in METHODS or METHODS[m].training != "none" for m in rows.method]]
+
+
+def ablation_context(path: str | Path, figure: Path) -> dict:
+    """The report's section on measured variants (empty when the file does not exist)."""
+    if not Path(path).is_file():
+        return {"ablations": ""}
+    rows = learned(read(path))
+    return {"ablations": ablation_table(rows), "ablations_file": str(path),
+            "ablations_scaling": scaling_figure(rows, figure),
+            "ablations_revisions": sorted(set(rows.revision))}

@@ -723,9 +723,11 @@ def headline_metrics(summ: pd.DataFrame, unseen: pd.DataFrame | None = None) -> 
 
 
 def write_report(params: Params, results: Path, out: Path, lock_path: str | Path = "dvc.lock",
-                 generalisation: Path | None = None, headline: Path | None = None) -> Path:
+                 generalisation: Path | None = None, headline: Path | None = None,
+                 ablations: Path | None = None) -> Path:
     """``generalisation``: the unseen-layout experiment's results folder (its section is left out without one);
-    ``headline``: where to write :func:`headline_metrics` as JSON."""
+    ``headline``: where to write :func:`headline_metrics` as JSON; ``ablations``: the measured variants of that
+    experiment (:mod:`hnsdt.evaluation.ablations`; its table and scaling figure are left out without one)."""
     summary_path = results / "summary.csv"
     if not summary_path.is_file():
         raise FileNotFoundError(f"{summary_path}: no evaluation summary (run `dvc repro evaluate`)")
@@ -758,6 +760,12 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
                 raise FileNotFoundError(f"{generalisation / 'summary.csv'}: no results of the unseen-layout "
                                         "experiment (run `dvc repro evaluate_generalisation`)")
             unseen = generalisation_context(params, generalisation, tmp / "figures" / "generalisation.png")
+        if ablations is not None:
+            from hnsdt.evaluation.ablations import ablation_context
+
+            if not ablations.is_file():
+                raise FileNotFoundError(f"{ablations}: no measured variants (benchmarks/generalisation.py --record)")
+            unseen |= ablation_context(ablations, tmp / "figures" / "scaling.png")
         envs, methods = sorted(set(summ.env)), sorted(set(summ.method))
         rev, digest = git_revision(), params_digest(params)
         recorded = episodes[episodes.rrd != ""]
@@ -778,7 +786,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             seeds_table=seed_lines(view), solved=f"{SOLVED:.0%}", bootstrap=f"{BOOTSTRAP:,}", usage=usage,
             numbers=_table(numbers), recorded=len(recorded),
             example_episode=recorded.episode_id.iloc[0] if len(recorded) else "",
-            generalisation=bool(unseen), **unseen)
+            generalisation=bool(unseen), **({"ablations": ""} | unseen))
         (tmp / "report.md").write_text(text)
         theorem_data = {**theorem_data, "claims": claim_rows} if claim_rows else theorem_data
         if paper_claim_rows and arms:
