@@ -30,10 +30,25 @@ from hnsdt.envs import load_layout  # noqa: E402
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+AFTER_THE_PIPELINE_RUN = {"test_pipeline_resume.py"}  # files that copy the shared tiny pipeline run (below)
+
+
 def pytest_collection_modifyitems(items):
-    """Files with slow (end-to-end) tests first: the workers take whole files, so the longest start at once."""
+    """Files with slow (end-to-end) tests first: the workers take whole files, so the longest start at once; the
+    files that copy the tiny pipeline's run last, so that the worker that takes one finds the run done (by the
+    worker running test_pipeline.py) rather than waiting for it."""
     slow_files = {item.path for item in items if item.get_closest_marker("slow")}
-    items.sort(key=lambda item: item.path not in slow_files)  # stable: file order otherwise unchanged
+    items.sort(key=lambda item: (item.path.name in AFTER_THE_PIPELINE_RUN, item.path not in slow_files))  # stable
+
+
+@pytest.fixture(scope="session")
+def pipeline_run(tmp_path_factory):
+    """The tiny pipeline's first `dvc repro`, shared by every worker (tiny_repo.shared_first_run): its repo, log
+    and output md5s."""
+    from tiny_repo import shared_first_run
+
+    base = tmp_path_factory.getbasetemp()
+    return shared_first_run(base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base)
 
 
 @pytest.fixture(scope="session")

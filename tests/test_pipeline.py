@@ -2,35 +2,27 @@
 
 import importlib.util
 import json
-import os
 import re
 import shutil
-import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pandas as pd
 import pytest
 import yaml
 
-from hnsdt.fileio import TMP_PREFIX
 from hnsdt.methods import LEARNED, METHODS
 from conftest import hnsdt_cli
-from tiny_repo import REPO, lock_outs, make_tiny_repo, ran_stages, run
+from tiny_repo import ENV, GIT_TRACKED_OUTS, REPO, copy_run, ran_stages, run
 
 pytestmark = pytest.mark.slow  # (pytest-xdist runs a file on one worker, in order: `--dist loadfile`)
-BIN = Path(sys.executable).parent
 STAGES = {m: METHODS[m].stage for m in LEARNED}  # learned method -> its DVC stage
 _UNSEEN = yaml.safe_load((REPO / "params.yaml").read_text())["generalisation"]  # the unseen-layout experiment
 UNSEEN = _UNSEEN["methods"] + _UNSEEN["baselines"]
 UNSEEN_STAGES = {"collect_generalisation", "evaluate_generalisation"} | {
     f"train_generalisation@{m}" for m in _UNSEEN["methods"]} | {
     f"train_generalisation_baselines@{m}" for m in _UNSEEN["baselines"]}
-GIT_TRACKED_OUTS = {"metrics/summary.csv", "metrics/metrics.json", "metrics/headline.json"}  # outputs with `cache: false`: in git, and
-# changed by a run with other params
-ENV = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")  # the log as it happens
 
 
 def _set(repo: Path, section: str, key: str, value) -> None:
@@ -65,17 +57,15 @@ def _imports_by_stage(log: str) -> dict[str, set[str]]:
 
 
 @pytest.fixture(scope="module")
-def repo_copy(tmp_path_factory):
-    return make_tiny_repo(tmp_path_factory.mktemp("pipeline") / "repo")
+def repo_copy(pipeline_run, tmp_path_factory):
+    """This file's copy of the tiny pipeline's first run (conftest's ``pipeline_run``), which its tests change."""
+    return copy_run(pipeline_run[0], tmp_path_factory.mktemp("pipeline") / "repo")
 
 
 @pytest.fixture(scope="module")
-def first_run(repo_copy):
+def first_run(pipeline_run):
     """The uninterrupted run: its log (with every process's imports) and the md5 of every output in dvc.lock."""
-    out = subprocess.run(["dvc", "repro"], cwd=repo_copy, env=dict(ENV, PYTHONPROFILEIMPORTTIME="1"), text=True,
-                         stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
-    assert out.returncode == 0, out.stdout[-5000:]
-    return out.stdout, lock_outs(repo_copy)
+    return pipeline_run[1], pipeline_run[2]
 
 
 def test_repro_runs_everything_then_nothing(repo_copy, first_run):
@@ -191,59 +181,6 @@ def test_the_trained_models_run_on_a_folder_of_a_users_maps(tmp_path, repo_copy,
     assert set(drawn.layout) == {str(tmp_path / "mine/long_corridor.txt")}
     assert set(drawn.method) == set(UNSEEN) | {"symbolic"} and drawn[drawn.method == "symbolic"].success.all()
     assert (repo_copy / "generalisation/results/summary.csv").read_bytes() == before
-
-
-def _tmp_under(folder: Path) -> bool:
-    return folder.is_dir() and any(p.name.startswith(TMP_PREFIX) for p in folder.iterdir())
-
-
-def _inside_training(repo: Path, log: str) -> bool:
-    """A `train@` stage has started; a second later its process is importing or training, not yet saving."""
-    if "Running stage 'train@" not in log:
-        return False
-    time.sleep(1.0)
-    return True
-
-
-# stage run again and SIGKILLed: (what to wait for before the kill, the output that must then not exist);
-# downstream first, so each forced run still finds its inputs
-KILL_POINTS = {
-    "evaluate": (lambda repo, log: _tmp_under(repo), "results"),
-    "train@keydoor-hnsdt": (_inside_training, None),
-    "collect@keydoor": (lambda repo, log: _tmp_under(repo / "data/datasets"), "data/datasets/keydoor"),
-}
-
-
-def test_killed_runs_resume_to_the_same_outputs(tmp_path, repo_copy, first_run):
-    """SIGKILL `dvc repro --force` of the evaluate, a training and a collect stage while they run; no
-    half-written output is ever at its final path, and the next run of each (forced: `dvc repro` alone would
-    restore the outputs from DVC's cache instead of computing them) cleans up after the killed one and writes
-    the uninterrupted run's outputs, byte for byte (the .rrd recordings excepted: rerun's row ids are
-    time-based)."""
-    repo = repo_copy
-    for stage, (ready, final) in KILL_POINTS.items():
-        log_path = tmp_path / f"{stage}.log"
-        with open(log_path, "w") as log:
-            proc = subprocess.Popen(["dvc", "repro", "--force", "--single-item", stage], cwd=repo, env=ENV,
-                                    stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-        deadline = time.monotonic() + 300
-        while not ready(repo, log_path.read_text()):
-            assert proc.poll() is None, f"dvc repro ended before reaching {stage}:\n{log_path.read_text()[-2000:]}"
-            assert time.monotonic() < deadline, f"never reached {stage}"
-            time.sleep(0.05)
-        os.killpg(proc.pid, signal.SIGKILL)
-        proc.wait()
-        assert f"Running stage '{stage}" in log_path.read_text()
-        if final:
-            assert not (repo / final).exists(), f"half-written {final} after a kill during {stage}"
-    for stage in reversed(KILL_POINTS):  # upstream first
-        assert ran_stages(run(["dvc", "repro", "--force", "--single-item", stage], repo)) == {stage}
-    assert not list(repo.rglob(f"{TMP_PREFIX}*")), "temporaries of killed writes were not cleaned up"
-    status = run(["git", "status", "--porcelain", "--untracked-files=all"], repo).splitlines()
-    assert {line[3:] for line in status} <= {"dvc.lock"} | GIT_TRACKED_OUTS, status
-    outs, reference = lock_outs(repo), first_run[1]
-    assert outs.keys() == reference.keys()
-    assert {k for k in outs if outs[k] != reference[k]} <= {"evaluate:recordings"}
 
 
 def test_a_changed_knob_reruns_only_the_stages_that_read_it(repo_copy, first_run):

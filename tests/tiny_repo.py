@@ -4,6 +4,7 @@ Used by the end-to-end tests and by ``benchmarks/determinism.py``; nothing here 
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import subprocess
@@ -14,6 +15,9 @@ import yaml
 
 REPO = Path(__file__).resolve().parent.parent
 BIN = Path(sys.executable).parent
+ENV = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")  # DVC from the venv; logs as they happen
+GIT_TRACKED_OUTS = {"metrics/summary.csv", "metrics/metrics.json", "metrics/headline.json"}  # outputs with
+# `cache: false`: in git, and changed by a run with other params
 
 
 def copy_repo(dst: Path) -> None:
@@ -82,3 +86,30 @@ def lock_outs(repo: Path) -> dict[str, str]:
     """``stage:out path -> md5`` of every output recorded in ``dvc.lock``."""
     lock = yaml.safe_load((repo / "dvc.lock").read_text())
     return {f"{stage}:{o['path']}": o.get("md5", "") for stage, s in lock["stages"].items() for o in s.get("outs", [])}
+
+
+def shared_first_run(shared: Path) -> tuple[Path, str, dict[str, str]]:
+    """The tiny pipeline's uninterrupted `dvc repro`, run once for every test file that needs it: whichever
+    pytest-xdist worker asks first runs it under a file lock in ``shared`` (a folder all workers see), the others
+    wait for it. Returns its repo (as the run left it: copy it before changing anything, :func:`copy_run`), its
+    log (with every process's imports: PYTHONPROFILEIMPORTTIME) and the md5 of every output in dvc.lock."""
+    from filelock import FileLock
+
+    root, done = shared / "first-run", shared / "first-run.json"
+    with FileLock(str(shared / "first-run.lock")):
+        if not done.is_file():
+            repo = make_tiny_repo(root / "repo")
+            out = subprocess.run(["dvc", "repro"], cwd=repo, env=dict(ENV, PYTHONPROFILEIMPORTTIME="1"), text=True, stdout=subprocess.PIPE,
+                                 stderr=subprocess.STDOUT)
+            result = {"log": out.stdout, "outs": lock_outs(repo) if out.returncode == 0 else None}
+            done.write_text(json.dumps(result))  # (a failed run too: the other workers fail at once, not again)
+    result = json.loads(done.read_text())
+    if result["outs"] is None:
+        raise AssertionError("the tiny pipeline's dvc repro failed:\n" + result["log"][-5000:])
+    return root / "repo", result["log"], result["outs"]
+
+
+def copy_run(repo: Path, dst: Path) -> Path:
+    """A copy of a pipeline run's repo (git, DVC cache, outputs) that a test may change."""
+    shutil.copytree(repo, dst, symlinks=True)
+    return dst

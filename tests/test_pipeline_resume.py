@@ -1,0 +1,78 @@
+"""Killed pipeline runs resume to the same outputs: on a copy of the tiny pipeline's first run (conftest's
+``pipeline_run``, shared with test_pipeline.py), so that the two files run on two pytest-xdist workers at once."""
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+
+from hnsdt.fileio import TMP_PREFIX
+from tiny_repo import ENV, GIT_TRACKED_OUTS, copy_run, lock_outs, ran_stages, run
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def repo_copy(pipeline_run, tmp_path_factory):
+    return copy_run(pipeline_run[0], tmp_path_factory.mktemp("resume") / "repo")
+
+
+@pytest.fixture(scope="module")
+def first_run(pipeline_run):
+    return pipeline_run[1], pipeline_run[2]
+
+
+def _tmp_under(folder: Path) -> bool:
+    return folder.is_dir() and any(p.name.startswith(TMP_PREFIX) for p in folder.iterdir())
+
+
+def _inside_training(repo: Path, log: str) -> bool:
+    """A `train@` stage has started; a second later its process is importing or training, not yet saving."""
+    if "Running stage 'train@" not in log:
+        return False
+    time.sleep(1.0)
+    return True
+
+
+# stage run again and SIGKILLed: (what to wait for before the kill, the output that must then not exist);
+# downstream first, so each forced run still finds its inputs
+KILL_POINTS = {
+    "evaluate": (lambda repo, log: _tmp_under(repo), "results"),
+    "train@keydoor-hnsdt": (_inside_training, None),
+    "collect@keydoor": (lambda repo, log: _tmp_under(repo / "data/datasets"), "data/datasets/keydoor"),
+}
+
+
+def test_killed_runs_resume_to_the_same_outputs(tmp_path, repo_copy, first_run):
+    """SIGKILL `dvc repro --force` of the evaluate, a training and a collect stage while they run; no
+    half-written output is ever at its final path, and the next run of each (forced: `dvc repro` alone would
+    restore the outputs from DVC's cache instead of computing them) cleans up after the killed one and writes
+    the uninterrupted run's outputs, byte for byte (the .rrd recordings excepted: rerun's row ids are
+    time-based)."""
+    repo = repo_copy
+    for stage, (ready, final) in KILL_POINTS.items():
+        log_path = tmp_path / f"{stage}.log"
+        with open(log_path, "w") as log:
+            proc = subprocess.Popen(["dvc", "repro", "--force", "--single-item", stage], cwd=repo, env=ENV,
+                                    stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+        deadline = time.monotonic() + 300
+        while not ready(repo, log_path.read_text()):
+            assert proc.poll() is None, f"dvc repro ended before reaching {stage}:\n{log_path.read_text()[-2000:]}"
+            assert time.monotonic() < deadline, f"never reached {stage}"
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        assert f"Running stage '{stage}" in log_path.read_text()
+        if final:
+            assert not (repo / final).exists(), f"half-written {final} after a kill during {stage}"
+    for stage in reversed(KILL_POINTS):  # upstream first
+        assert ran_stages(run(["dvc", "repro", "--force", "--single-item", stage], repo)) == {stage}
+    assert not list(repo.rglob(f"{TMP_PREFIX}*")), "temporaries of killed writes were not cleaned up"
+    status = run(["git", "status", "--porcelain", "--untracked-files=all"], repo).splitlines()
+    assert {line[3:] for line in status} <= {"dvc.lock"} | GIT_TRACKED_OUTS, status
+    outs, reference = lock_outs(repo), first_run[1]
+    assert outs.keys() == reference.keys()
+    assert {k for k in outs if outs[k] != reference[k]} <= {"evaluate:recordings"}
