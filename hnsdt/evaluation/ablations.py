@@ -81,7 +81,7 @@ def ablation_table(rows: pd.DataFrame) -> str:
     from hnsdt.methods import METHODS, PROPOSED
 
     splits = [s for s in SPLITS if s in set(rows.split)]
-    lines = ["| variant | changes | training maps × episodes | encoder | seeds | method | validation steps | "
+    lines = ["| variant | ingredient | training maps × episodes | encoder | seeds | method | validation steps | "
              + " | ".join(SPLITS[s] for s in splits) + " | revision |",
              "|---" * (8 + len(splits)) + "|"]
     rank = {m: i for i, m in enumerate(dict.fromkeys([PROPOSED, *METHODS]))}  # HNSDT first, then the paper's order

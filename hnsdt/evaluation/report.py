@@ -760,12 +760,13 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
                 raise FileNotFoundError(f"{generalisation / 'summary.csv'}: no results of the unseen-layout "
                                         "experiment (run `dvc repro evaluate_generalisation`)")
             unseen = generalisation_context(params, generalisation, tmp / "figures" / "generalisation.png")
-        if ablations is not None:
+        variants = {"ablations": ""}  # (a part of the unseen-layout section: shown with it)
+        if ablations is not None and unseen:
             from hnsdt.evaluation.ablations import ablation_context
 
             if not ablations.is_file():
                 raise FileNotFoundError(f"{ablations}: no measured variants (benchmarks/generalisation.py --record)")
-            unseen |= ablation_context(ablations, tmp / "figures" / "scaling.png")
+            variants = ablation_context(ablations, tmp / "figures" / "scaling.png")
         envs, methods = sorted(set(summ.env)), sorted(set(summ.method))
         rev, digest = git_revision(), params_digest(params)
         recorded = episodes[episodes.rrd != ""]
@@ -786,7 +787,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             seeds_table=seed_lines(view), solved=f"{SOLVED:.0%}", bootstrap=f"{BOOTSTRAP:,}", usage=usage,
             numbers=_table(numbers), recorded=len(recorded),
             example_episode=recorded.episode_id.iloc[0] if len(recorded) else "",
-            generalisation=bool(unseen), **({"ablations": ""} | unseen))
+            generalisation=bool(unseen), **unseen, **variants)
         (tmp / "report.md").write_text(text)
         theorem_data = {**theorem_data, "claims": claim_rows} if claim_rows else theorem_data
         if paper_claim_rows and arms:
