@@ -101,8 +101,9 @@ def ablation_table(rows: pd.DataFrame) -> str:
 
 def scaling_figure(rows: pd.DataFrame, path: Path) -> bool:
     """Held-out and hand-drawn steps / optimum (left) and success (right) against the number of training maps,
-    one line per method and split through its variants in order of maps, then episodes per map (each point
-    labelled with the latter). False (no figure) when fewer than two map counts were measured."""
+    one line per method and split through the variant with the most episodes per map at each count (fewer
+    episodes per map: hollow markers beside it; each point labelled with its episodes per map). False (no
+    figure) when fewer than two map counts were measured."""
     points = scaling_points(rows)
     if points.train_layouts.nunique() < 2:
         return False
@@ -115,11 +116,14 @@ def scaling_figure(rows: pd.DataFrame, path: Path) -> bool:
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for (method, split), d in points[points.split.isin(["heldout", "drawn"])].groupby(["method", "split"], sort=False):
-        d = d.sort_values(["train_layouts", "episodes_per_map"], kind="stable")  # (the same maps: fewer episodes first)
+        d = d.sort_values(["train_layouts", "episodes_per_map"], kind="stable")
+        most = d.groupby("train_layouts").episodes_per_map.transform("max") == d.episodes_per_map
         style = {"marker": "o" if split == "heldout" else "s", "linestyle": "-" if split == "heldout" else "--"}
         label = f"{METHODS[method].label if method in METHODS else method}, {SPLITS[split]}"
         for ax, column in zip(axes, ("steps_ratio", "success")):
-            line, = ax.plot(d.train_layouts, d[column], label=label, **style)
+            line, = ax.plot(d.train_layouts[most], d[column][most], label=label, **style)
+            ax.plot(d.train_layouts[~most], d[column][~most], marker=style["marker"], linestyle="none",
+                    markerfacecolor="none", color=line.get_color())  # fewer episodes per map: hollow, apart
             if column == "steps_ratio":
                 for x, y, eps in zip(d.train_layouts, d[column], d.episodes_per_map):
                     ax.annotate(f"{eps}/map", (x, y), textcoords="offset points", xytext=(4, 4), fontsize=7,
