@@ -51,6 +51,20 @@ def pipeline_run(tmp_path_factory):
     return shared_first_run(base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base)
 
 
+@pytest.fixture(scope="module")
+def repo_copy(pipeline_run, tmp_path_factory, request):
+    """The test file's own copy of the tiny pipeline's first run, which its tests may change."""
+    from tiny_repo import copy_run
+
+    return copy_run(pipeline_run[0], tmp_path_factory.mktemp(request.module.__name__) / "repo")
+
+
+@pytest.fixture(scope="module")
+def first_run(pipeline_run):
+    """The first run's log (with every process's imports) and the md5 of every output in dvc.lock."""
+    return pipeline_run[1], pipeline_run[2]
+
+
 @pytest.fixture(scope="session")
 def keydoor():
     return load_layout("keydoor_5x5")

@@ -14,7 +14,7 @@ import yaml
 
 from hnsdt.methods import LEARNED, METHODS
 from conftest import hnsdt_cli
-from tiny_repo import ENV, GIT_TRACKED_OUTS, REPO, copy_run, ran_stages, run
+from tiny_repo import ENV, GIT_TRACKED_OUTS, REPO, ran_stages, run
 
 pytestmark = pytest.mark.slow  # (pytest-xdist runs a file on one worker, in order: `--dist loadfile`)
 STAGES = {m: METHODS[m].stage for m in LEARNED}  # learned method -> its DVC stage
@@ -54,18 +54,6 @@ def _imports_by_stage(log: str) -> dict[str, set[str]]:
             origin = Path(importlib.util.find_spec(m.group(1)).origin)
             found[stage].add(origin.relative_to(REPO).as_posix())
     return found
-
-
-@pytest.fixture(scope="module")
-def repo_copy(pipeline_run, tmp_path_factory):
-    """This file's copy of the tiny pipeline's first run (conftest's ``pipeline_run``), which its tests change."""
-    return copy_run(pipeline_run[0], tmp_path_factory.mktemp("pipeline") / "repo")
-
-
-@pytest.fixture(scope="module")
-def first_run(pipeline_run):
-    """The uninterrupted run: its log (with every process's imports) and the md5 of every output in dvc.lock."""
-    return pipeline_run[1], pipeline_run[2]
 
 
 def test_repro_runs_everything_then_nothing(repo_copy, first_run):

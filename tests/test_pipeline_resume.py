@@ -1,5 +1,6 @@
 """Killed pipeline runs resume to the same outputs: on a copy of the tiny pipeline's first run (conftest's
-``pipeline_run``, shared with test_pipeline.py), so that the two files run on two pytest-xdist workers at once."""
+``pipeline_run``, shared with test_pipeline.py; ``repo_copy`` is this file's own), so that the two files run
+on two pytest-xdist workers at once."""
 
 import os
 import signal
@@ -10,19 +11,9 @@ from pathlib import Path
 import pytest
 
 from hnsdt.fileio import TMP_PREFIX
-from tiny_repo import ENV, GIT_TRACKED_OUTS, copy_run, lock_outs, ran_stages, run
+from tiny_repo import ENV, GIT_TRACKED_OUTS, lock_outs, ran_stages, run
 
 pytestmark = pytest.mark.slow
-
-
-@pytest.fixture(scope="module")
-def repo_copy(pipeline_run, tmp_path_factory):
-    return copy_run(pipeline_run[0], tmp_path_factory.mktemp("resume") / "repo")
-
-
-@pytest.fixture(scope="module")
-def first_run(pipeline_run):
-    return pipeline_run[1], pipeline_run[2]
 
 
 def _tmp_under(folder: Path) -> bool:
