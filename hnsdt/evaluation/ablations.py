@@ -53,7 +53,7 @@ def record(path: str | Path, rows: pd.DataFrame) -> None:
     order = list(dict.fromkeys([*old.variant, rows.variant.iloc[0]]))
     new = new.iloc[np.argsort([order.index(v) for v in new.variant], kind="stable")]
     with atomic_file(path) as tmp:
-        new.to_csv(tmp, index=False, float_format="%.4f")
+        new.to_csv(tmp, index=False, float_format="%.6f")
 
 
 def scaling_points(rows: pd.DataFrame) -> pd.DataFrame:
