@@ -102,8 +102,9 @@ def main() -> None:
             runs = gen.plan_runs(params, method, dataset)
             train_all(runs, g["family"], tmp / "models" / method, tmp / "curves" / method, compute, progress=False)
             times[f"train {method}"] = time.perf_counter() - t0
-            validation += validation_lines(tmp / "models" / method, method, g["seeds"], "")
-            best[method] = mean_validation(tmp / "models" / method, g["seeds"])
+            kept = kept_validation(tmp / "models" / method, g["seeds"])
+            validation += validation_lines(kept, method, "")
+            best[method] = mean_validation(kept)
             rounds[method] = args.relabel_rounds if args.relabel and method in DT_METHODS else 0
             for r in range(rounds[method]):
                 t0 = time.perf_counter()
@@ -113,8 +114,9 @@ def main() -> None:
                 train_all(runs, g["family"], tmp / "models" / method, tmp / "curves" / method, compute,
                           progress=False)
                 times[f"train {method} round {r + 1}"] = time.perf_counter() - t0
-                validation += validation_lines(tmp / "models" / method, method, g["seeds"], f" (relabel round {r + 1})")
-                best[method] = mean_validation(tmp / "models" / method, g["seeds"])
+                kept = kept_validation(tmp / "models" / method, g["seeds"])
+                validation += validation_lines(kept, method, f" (relabel round {r + 1})")
+                best[method] = mean_validation(kept)
         t0 = time.perf_counter()
         gen.evaluate(params, tmp / "models", tmp / "results", compute, progress=False)
         times["evaluate"] = time.perf_counter() - t0
@@ -141,25 +143,24 @@ def main() -> None:
         print(f"recorded variant {args.record!r} ({args.ingredient}) in {args.results}")
 
 
-def validation_lines(models: Path, method: str, seeds: list[int], label: str) -> list[str]:
-    """Each seed's budget measure on the validation layouts at the epoch kept (choices are made on it)."""
-    lines = []
+def kept_validation(models: Path, seeds: list[int]) -> dict[int, dict]:
+    """Each seed's budget measure on the validation layouts at the epoch kept (choices are made on it):
+    ``{seed: {"value": steps, "epoch": epoch}}``, for the seeds trained with it."""
+    kept = {}
     for seed in seeds:
         usage = load_checkpoint(models / f"seed{seed}")[1].get("usage", {})
         if usage.get("validation_steps"):
-            best = min(usage["validation_steps"], key=lambda h: h["value"])
-            lines.append(f"{method}{label} seed {seed}: {best['value']:.2f} steps at epoch {best['epoch']}")
-    return lines
+            kept[seed] = min(usage["validation_steps"], key=lambda h: h["value"])
+    return kept
 
 
-def mean_validation(models: Path, seeds: list[int]) -> float:
-    """The mean over seeds of the budget measure at the epoch kept (NaN for a method trained without it)."""
-    values = []
-    for seed in seeds:
-        usage = load_checkpoint(models / f"seed{seed}")[1].get("usage", {})
-        if usage.get("validation_steps"):
-            values.append(min(h["value"] for h in usage["validation_steps"]))
-    return sum(values) / len(values) if values else float("nan")
+def validation_lines(kept: dict[int, dict], method: str, label: str) -> list[str]:
+    return [f"{method}{label} seed {seed}: {h['value']:.2f} steps at epoch {h['epoch']}" for seed, h in kept.items()]
+
+
+def mean_validation(kept: dict[int, dict]) -> float:
+    """The mean over seeds of :func:`kept_validation` (NaN for a method trained without it)."""
+    return sum(h["value"] for h in kept.values()) / len(kept) if kept else float("nan")
 
 
 def folder_digest(folder: Path) -> str:

@@ -56,7 +56,7 @@ def tiny_params(path: Path) -> None:
 
 def run(args, cwd, check: bool = True, env: dict | None = None) -> str:
     """Run a command with the venv first on PATH; stdout + stderr, asserting success if ``check``."""
-    env = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", **(env or {}))
+    env = dict(ENV, **(env or {}))
     out = subprocess.run(args, cwd=cwd, env=env, capture_output=True, text=True)
     if check and out.returncode != 0:
         raise AssertionError(f"{' '.join(map(str, args))} exited {out.returncode}:\n"

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hnsdt.agents.executor import ExecutorConfig, PlanExecutor
+from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.agents.rollout import rollout
 from hnsdt.agents.symbolic import SymbolicAgent
 from hnsdt.data.collect import random_start_states
@@ -48,8 +48,11 @@ def learner_frames(model, method: str, facts: dict, layouts: list, executor: Exe
             agent = make_agent(model, facts, layout, executor)
             for ep in rollout(env, agent, batch_seed, starts):
                 T = ep.length
-                ids, targets = ((ep.subgoal_ids, ep.subgoal_targets) if hasattr(agent, "executors")
-                                else planner_subgoals(layout, executor, ep.states[:T]))
+                if hasattr(agent, "executors"):  # it pursued the planner's sub-goals
+                    ids, targets = ep.subgoal_ids, ep.subgoal_targets
+                else:  # the planner's first sub-goal from each state it visited
+                    expert.reset(ep.states[:T])
+                    ids, targets = expert.subgoals()
                 arrays["states"].append(view_states(layout, ep.states[:T], view_radius))
                 arrays["actions"].append(expert.low_level(ep.states[:T], ids, targets))
                 arrays["rewards"].append(ep.rewards)
@@ -61,13 +64,6 @@ def learner_frames(model, method: str, facts: dict, layouts: list, executor: Exe
     cat = {k: np.concatenate(v) for k, v in arrays.items()}
     return frames_from_arrays(cat["states"], cat["actions"], cat["rewards"], cat["ids"], cat["targets"],
                               cat["episode"], cat["t"], [RELABELLED] * len(cat["t"]))
-
-
-def planner_subgoals(layout, executor: ExecutorConfig, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The sub-goal id (T,) and target (T, 2) of the planner's first operator from each state."""
-    goals = [PlanExecutor(layout, executor).start(s).subgoal for s in states]
-    return (np.array([g.id for g in goals], dtype=np.int64),
-            np.array([g.target for g in goals], dtype=np.int64).reshape(-1, 2))
 
 
 def join_frames(first: Frames, second: Frames) -> Frames:

@@ -13,10 +13,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-import pandas as pd
+import matplotlib
 
-from hnsdt.fileio import atomic_file
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from hnsdt.fileio import atomic_file  # noqa: E402
+from hnsdt.methods import LEARNED, METHODS, PROPOSED  # noqa: E402
 
 INGREDIENTS = ("reference", "encoder", "maps", "relabelling", "family")  # reference: the default's knobs
 COLUMNS = [  # one row per variant x method x split
@@ -63,10 +68,16 @@ def scaling_points(rows: pd.DataFrame) -> pd.DataFrame:
     if ref.empty:
         return rows.iloc[:0]
     same = (rows.encoder == ref.encoder.iloc[0]) & (rows.family == ref.family.iloc[0]) & (rows.relabel_rounds == 0)
-    return rows[rows.ingredient.isin(["reference", "maps"]) & same].sort_values("train_layouts", kind="stable")
+    return rows[rows.ingredient.isin(["reference", "maps"]) & same]
 
 
 SPLITS = {"heldout": "held-out", "minigrid": "MiniGrid 8×8", "minigrid_16x16": "MiniGrid 16×16", "drawn": "hand-drawn"}
+# the unseen splits, short names for the table's columns (report.py's SPLIT_LABELS are the long ones; it imports this
+# module, which therefore cannot import it: tests/test_layers.py forbids the cycle)
+
+
+def _label(method: str) -> str:
+    return METHODS[method].label if method in METHODS else method
 
 
 def _cell(success: float, ratio: float) -> str:
@@ -78,15 +89,14 @@ def _cell(success: float, ratio: float) -> str:
 def ablation_table(rows: pd.DataFrame) -> str:
     """Markdown: per variant and method, the validation measure and success (steps / optimum) on each unseen
     split, with the revision that measured it."""
-    from hnsdt.methods import METHODS, PROPOSED
-
     splits = [s for s in SPLITS if s in set(rows.split)]
     lines = ["| variant | ingredient | training maps × episodes | encoder | seeds | method | validation steps | "
              + " | ".join(SPLITS[s] for s in splits) + " | revision |",
              "|---" * (8 + len(splits)) + "|"]
     rank = {m: i for i, m in enumerate(dict.fromkeys([PROPOSED, *METHODS]))}  # HNSDT first, then the paper's order
+    variants = list(dict.fromkeys(rows.variant))
     keys = sorted(dict.fromkeys(zip(rows.variant, rows.method)),
-                  key=lambda k: (list(dict.fromkeys(rows.variant)).index(k[0]), rank.get(k[1], len(rank))))
+                  key=lambda k: (variants.index(k[0]), rank.get(k[1], len(rank))))
     for variant, method in keys:
         d = rows[(rows.variant == variant) & (rows.method == method)]
         r, by = d.iloc[0], d.set_index("split")
@@ -94,7 +104,7 @@ def ablation_table(rows: pd.DataFrame) -> str:
         relabel = f", {r.relabel_rounds} relabelled round(s)" if r.relabel_rounds else ""
         validation = "–" if pd.isna(r.validation_steps) else f"{r.validation_steps:.1f}"
         lines.append(f"| {variant} | {r.ingredient} | {r.train_layouts:,} × {r.episodes_per_map} `{r.family}`{relabel} "
-                     f"| {r.encoder} | {r.seeds} | {METHODS[method].label if method in METHODS else method} | "
+                     f"| {r.encoder} | {r.seeds} | {_label(method)} | "
                      f"{validation} | {cells} | `{r.revision}` |")
     return "\n".join(lines)
 
@@ -107,19 +117,12 @@ def scaling_figure(rows: pd.DataFrame, path: Path) -> bool:
     points = scaling_points(rows)
     if points.train_layouts.nunique() < 2:
         return False
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from hnsdt.methods import METHODS
-
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for (method, split), d in points[points.split.isin(["heldout", "drawn"])].groupby(["method", "split"], sort=False):
         d = d.sort_values(["train_layouts", "episodes_per_map"], kind="stable")
         most = d.groupby("train_layouts").episodes_per_map.transform("max") == d.episodes_per_map
         style = {"marker": "o" if split == "heldout" else "s", "linestyle": "-" if split == "heldout" else "--"}
-        label = f"{METHODS[method].label if method in METHODS else method}, {SPLITS[split]}"
+        label = f"{_label(method)}, {SPLITS[split]}"
         for ax, column in zip(axes, ("steps_ratio", "success")):
             line, = ax.plot(d.train_layouts[most], d[column][most], label=label, **style)
             ax.plot(d.train_layouts[~most], d[column][~most], marker=style["marker"], linestyle="none",
@@ -147,18 +150,12 @@ def scaling_figure(rows: pd.DataFrame, path: Path) -> bool:
     return True
 
 
-def learned(rows: pd.DataFrame) -> pd.DataFrame:
-    """The rows of methods that learn (the planner with hand-written controllers is the same in every variant)."""
-    from hnsdt.methods import METHODS
-
-    return rows[[m not in METHODS or METHODS[m].training != "none" for m in rows.method]]
-
-
 def ablation_context(path: str | Path, figure: Path) -> dict:
     """The report's section on measured variants (empty when the file does not exist)."""
     if not Path(path).is_file():
         return {"ablations": ""}
-    rows = learned(read(path))
+    rows = read(path)
+    rows = rows[rows.method.isin(LEARNED)]  # (the planner with hand-written controllers is the same in every one)
     return {"ablations": ablation_table(rows), "ablations_file": str(path),
             "ablations_scaling": scaling_figure(rows, figure),
             "ablations_revisions": sorted(set(rows.revision))}
