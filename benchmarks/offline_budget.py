@@ -37,7 +37,7 @@ def run(task):
     from pathlib import Path
 
     from hnsdt.config import env_spec, load_params, method_executor
-    from hnsdt.evaluation.evaluate import Cell, _navigator, build_agent, run_cell, segment_rows
+    from hnsdt.evaluation.evaluate import Cell, layout_navigator, build_agent, run_cell, segment_rows
     from hnsdt.methods import DT_METHODS
     from hnsdt.models.train import train_dt
     from hnsdt.training import plan_runs
@@ -77,7 +77,7 @@ def run(task):
                    "success": len(ok) / len(eps), "mean_steps": float(np.mean(ok)) if ok else float("nan"),
                    "subgoals_reached": float(np.mean(segments)) if segments else float("nan"),
                    "episode_steps": float(np.mean([x.length for x in eps]))}
-            seg = segment_rows(Cell(method, env, fp, seed), eps, _navigator(E.layout))
+            seg = segment_rows(Cell(method, env, fp, seed), eps, layout_navigator(E.layout))
             rows.append(row | {"segments": [r | {"epochs": e, "n_episodes": len(eps)} for r in seg]})
     return rows
 

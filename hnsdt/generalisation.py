@@ -18,7 +18,9 @@ Protocol (``generalisation`` in params.yaml; README, "Unseen layouts"):
    offline methods on the dataset, online ones on copies that draw a training layout at every reset.
 4. **Evaluate** (:func:`evaluate`): every method × seed × layout × fail_prob, ``episodes`` each, and the
    symbolic baseline as the reference; the exact optimum's expected steps per layout and fail_prob.
-   ``episodes.csv`` has one row per episode with its ``split`` and ``layout``; ``summary.csv`` the means.
+   ``episodes.csv`` has one row per episode with its ``split`` and ``layout``; ``summary.csv`` the means;
+   ``segments.csv`` one row per sub-goal a plan-following method (HNSDT, the symbolic baseline) pursued: where
+   its steps go.
 """
 
 from __future__ import annotations
@@ -294,13 +296,21 @@ def episode_seed(seed: int, layout_index: int) -> int:
     return int(np.random.SeedSequence([seed, layout_index, 7207]).generate_state(1)[0])
 
 
-def layout_rows(task, batch, episodes) -> list[dict]:
-    """One row per episode of a layout's batch (``batch.key``: the layout's source and the episodes per
-    fail_prob), for :func:`hnsdt.evaluation.evaluate.evaluate_run`."""
+def layout_rows(task, batch, episodes) -> tuple[list[dict], list[dict]]:
+    """``(episode rows, sub-goal segment rows)`` of a layout's batch (``batch.key``: the layout's source and the
+    episodes per fail_prob), for :func:`hnsdt.evaluation.evaluate.evaluate_run`; only plan-following methods
+    have segments (:func:`hnsdt.evaluation.evaluate.segment_facts`)."""
+    from hnsdt.evaluation.evaluate import layout_navigator, segment_facts
+
     src, per_fail_prob = batch.key
-    return [{"method": task.method, "seed": task.seed, "split": src.split, "layout": src.name,
-             "fail_prob": float(batch.fail_prob[i]), "episode": i % per_fail_prob, "success": bool(ep.success),
-             "steps": ep.length, "reward": round(ep.ret, 6)} for i, ep in enumerate(episodes)]
+    rows, segments = [], []
+    for i, ep in enumerate(episodes):
+        ids = {"method": task.method, "seed": task.seed, "split": src.split, "layout": src.name,
+               "fail_prob": float(batch.fail_prob[i]), "episode": i % per_fail_prob}
+        rows.append(ids | {"success": bool(ep.success), "steps": ep.length, "reward": round(ep.ret, 6)})
+        if ep.segments:
+            segments += [ids | row for row in segment_facts(ep, layout_navigator(src.layout), ids["fail_prob"])]
+    return rows, segments
 
 
 def layout_batches(seed: int, sources: tuple[Source, ...], fail_probs: tuple[float, ...], episodes: int) -> tuple:
@@ -315,7 +325,8 @@ def layout_batches(seed: int, sources: tuple[Source, ...], fail_probs: tuple[flo
 
 def evaluate(params: Params, models_root: str | Path, out_dir: str | Path, compute=None,
              progress: bool = True) -> pd.DataFrame:
-    """Run every method × seed on every evaluated layout; write ``episodes.csv`` and ``summary.csv``."""
+    """Run every method × seed on every evaluated layout; write ``episodes.csv``, ``summary.csv``,
+    ``segments.csv`` and ``layouts.csv``."""
     from hnsdt.compute import Compute, run_tasks
     from hnsdt.evaluation.evaluate import EvalTask, evaluate_run
     from hnsdt.fileio import atomic_dir
@@ -342,13 +353,15 @@ def evaluate(params: Params, models_root: str | Path, out_dir: str | Path, compu
             tasks.append(EvalTask(method, seed, executor, model, meta, eps,
                                   layout_batches(seed, sources, fps, g.episodes), layout_rows))
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
-    table = pd.DataFrame([row for batches in results for rows in batches for row in rows])
+    table = pd.DataFrame([row for batches in results for rows, _ in batches for row in rows])
+    segments = pd.DataFrame([row for batches in results for _, rows in batches for row in rows])
     optimal = {(s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fps}
     table["optimal_steps"], table["optimal_success"] = zip(*(optimal[key] for key in zip(table.layout, table.fail_prob)))
     with atomic_dir(Path(out_dir)) as tmp:
         tmp.mkdir()
         table.to_csv(tmp / "episodes.csv", index=False, float_format="%.6g")
         summary(table).to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
+        segments.to_csv(tmp / "segments.csv", index=False, float_format="%.6g")
         layouts = pd.DataFrame([{"split": s.split, "layout": s.name, "rows": s.layout.shape[0],
                                  "cols": s.layout.shape[1], "max_steps": s.max_steps} for s in sources])
         layouts.to_csv(tmp / "layouts.csv", index=False)

@@ -114,7 +114,7 @@ def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progr
     from hnsdt import generalisation as gen
 
     table = gen.evaluate(params, models, out, compute or compute_settings(params), progress=progress)
-    print(f"wrote {out}/episodes.csv ({len(table)} episodes), summary.csv, layouts.csv")
+    print(f"wrote {out}/episodes.csv ({len(table)} episodes), summary.csv, segments.csv, layouts.csv")
     return table
 
 

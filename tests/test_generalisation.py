@@ -532,6 +532,14 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     assert (table.optimal_steps > 0).all() and table[table.method == "symbolic"].success.all()
     summary = pd.read_csv(tmp_path / "results/summary.csv")
     assert len(summary) == 4 * 4 * 2 and summary.success_mean.between(0, 1).all()
+    # where the plan-followers' steps go: one row per sub-goal pursued, on every split; the controllers walk
+    # shortest paths (each first action right, each GoTo within its expected minimum at fail_prob 0)
+    segments = pd.read_csv(tmp_path / "results/segments.csv")
+    assert set(segments.method) == {"hnsdt", "symbolic"} and set(segments.split) == set(table.split)
+    controllers = segments[segments.method == "symbolic"]
+    assert controllers.first_action_right.all() and controllers.achieved.all()
+    goto = controllers[controllers.operator.str.startswith("GoTo") & (controllers.fail_prob == 0)]
+    assert len(goto) and (goto.steps == goto.optimal_steps).all() and (goto.right_actions == goto.steps).all()
     with pytest.raises(ValueError, match="not in generalisation.methods"):
         gen.plan_runs(validate(params), "options", dataset)
 

@@ -74,11 +74,11 @@ def test_symbolic_controllers_execute_move_plans_optimally(name):
 def test_the_decomposition_judges_each_action(keydoor, operators):
     """The controllers' every action is right (first ones included) and every segment is reached in its
     minimum; an action swapped for a wrong one is counted wrong at that step and nowhere else."""
-    from hnsdt.evaluation.evaluate import Cell, _navigator, right_actions, segment_rows
+    from hnsdt.evaluation.evaluate import Cell, layout_navigator, right_actions, segment_rows
 
     config = MOVE if operators == "move" else ExecutorConfig()
     (ep,) = rollout(KeyDoorVectorEnv(1, keydoor, 0.0, 100), SymbolicAgent(keydoor, config), seed=0)
-    nav = _navigator(keydoor)
+    nav = layout_navigator(keydoor)
     assert right_actions(ep, nav).all()
     rows = segment_rows(Cell("symbolic", "keydoor", 0.0, 0), [ep], nav)
     assert all(r["first_action_right"] and r["right_actions"] == r["steps"] == r["optimal_steps"]

@@ -113,7 +113,8 @@ def episode_rows(cell: Cell, episodes: list[Episode], layout: Layout, executor: 
 
 
 @lru_cache(maxsize=8)
-def _navigator(layout: Layout):
+def layout_navigator(layout: Layout):
+    """The shortest-path tables of a layout (cached: a task runs its layouts one after another)."""
     from hnsdt.agents.navigation import Navigator
 
     return Navigator(layout)
@@ -144,36 +145,41 @@ def right_actions(episode: Episode, navigator) -> np.ndarray:
     return right
 
 
-def segment_rows(cell: Cell, episodes: list[Episode], navigator) -> list[dict]:
-    """One row per executed sub-goal segment, with the optimal expected steps to achieve its operator from the
-    segment's first state: d / (1 − fail_prob) for a shortest path of d moves (d = 1 for a Move operator), 1 for
-    pick/open; whether its first action was right (:func:`right_actions`), how many of its actions were, and how
-    it ended (``outcome``: achieved, overran or broken — the replan's reason —, or ended with the episode)."""
+def segment_facts(episode: Episode, navigator, fail_prob: float) -> list[dict]:
+    """One row per executed sub-goal segment of a plan-following episode, with the optimal expected steps to
+    achieve its operator from the segment's first state: d / (1 − fail_prob) for a shortest path of d moves
+    (d = 1 for a Move operator), 1 for pick/open; whether its first action was right (:func:`right_actions`), how
+    many of its actions were, and how it ended (``outcome``: achieved, overran or broken — the replan's reason —,
+    or ended with the episode). Both experiments add their own identity columns in front."""
     rows = []
     lay = navigator.layout
-    for i, ep in enumerate(episodes):
-        right = right_actions(ep, navigator)
-        for seg in ep.segments:
-            end = seg.end if seg.end is not None else ep.length
-            if end <= seg.start:
-                continue
-            state = ep.states[seg.start]
-            target = tuple(int(v) for v in ep.subgoal_targets[seg.start])
-            if seg.operator.startswith("Move"):
-                optimal = 1 / (1 - cell.fail_prob)
-            elif seg.operator.startswith("GoTo"):
-                mask = navigator.door_mask({d for d, f in zip(lay.doors, state[lay.door_flags]) if f})
-                dist = navigator.distance[navigator.target_index[target], mask, state[0], state[1]]
-                optimal = dist / (1 - cell.fail_prob) if dist >= 0 else np.nan
-            else:
-                optimal = 1.0
-            rows.append({"method": cell.method, "env": cell.env, "fail_prob": cell.fail_prob, "seed": cell.seed,
-                         "episode_id": cell.episode_id(i), "operator": seg.operator, "subgoal_id": seg.subgoal_id,
-                         "start": seg.start, "end": end, "steps": end - seg.start, "optimal_steps": optimal,
-                         "achieved": bool(seg.achieved), "outcome": seg.outcome,
-                         "first_action_right": bool(right[seg.start]),
-                         "right_actions": int(right[seg.start:end].sum())})
+    right = right_actions(episode, navigator)
+    for seg in episode.segments:
+        end = seg.end if seg.end is not None else episode.length
+        if end <= seg.start:
+            continue
+        state = episode.states[seg.start]
+        target = tuple(int(v) for v in episode.subgoal_targets[seg.start])
+        if seg.operator.startswith("Move"):
+            optimal = 1 / (1 - fail_prob)
+        elif seg.operator.startswith("GoTo"):
+            mask = navigator.door_mask({d for d, f in zip(lay.doors, state[lay.door_flags]) if f})
+            dist = navigator.distance[navigator.target_index[target], mask, state[0], state[1]]
+            optimal = dist / (1 - fail_prob) if dist >= 0 else np.nan
+        else:
+            optimal = 1.0
+        rows.append({"operator": seg.operator, "subgoal_id": seg.subgoal_id, "start": seg.start, "end": end,
+                     "steps": end - seg.start, "optimal_steps": optimal, "achieved": bool(seg.achieved),
+                     "outcome": seg.outcome, "first_action_right": bool(right[seg.start]),
+                     "right_actions": int(right[seg.start:end].sum())})
     return rows
+
+
+def segment_rows(cell: Cell, episodes: list[Episode], navigator) -> list[dict]:
+    """The paper protocol's :func:`segment_facts` of a cell's episodes, after the cell's columns."""
+    return [{"method": cell.method, "env": cell.env, "fail_prob": cell.fail_prob, "seed": cell.seed,
+             "episode_id": cell.episode_id(i)} | row
+            for i, ep in enumerate(episodes) for row in segment_facts(ep, navigator, cell.fail_prob)]
 
 
 def training_segment_counts(dataset_root: str | Path, env: str, behaviours) -> list[dict]:
@@ -290,7 +296,7 @@ def cell_outputs(task: EvalTask, batch: Batch, episodes: list[Episode]):
     """The paper protocol's rows of one cell: ``(episode rows, segment rows, its first log_episodes episodes)``."""
     cell = batch.key
     return (episode_rows(cell, episodes, batch.layout, task.executor),
-            segment_rows(cell, episodes, _navigator(batch.layout)), episodes[:task.log_episodes])
+            segment_rows(cell, episodes, layout_navigator(batch.layout)), episodes[:task.log_episodes])
 
 
 def cell_batches(method: str, env: str, seed: int, fail_probs, layout: Layout, max_steps: int,

@@ -446,6 +446,35 @@ def step_decomposition(segments: pd.DataFrame, by: list[str]) -> pd.DataFrame:
         first=("first_action_right", "mean"), right=("right_actions", "sum"), reached=("achieved", "mean"))
 
 
+DECOMPOSITION_HEAD = ["segments / episode", "steps / episode (minimum)", "first action right", "reached"]
+
+
+def decomposition_cells(seg: pd.DataFrame, n_ep: pd.Series, by: list[str], pair: list[str],
+                        sort: bool = True) -> list[list]:
+    """Rows ``[*group, kind, cells of pair[0], cells of pair[1]]`` of :data:`DECOMPOSITION_HEAD`, per ``by``
+    group and kind of sub-goal (Move / GoTo first): the segments and steps per episode (``n_ep``: episodes per
+    method + ``by`` group), the minimum steps beside them, the shares of first actions right and of sub-goals
+    reached within their allowance. ``sort``: the groups in sorted order, else in ``seg``'s."""
+    seg = seg.assign(kind=seg.operator.str.extract(r"^(\w+)", expand=False))
+    t = step_decomposition(seg, ["method", *by])
+    kinds = sorted(set(seg.kind), key=lambda k: (k not in ("Move", "GoTo"), k))
+    rows = []
+    for group, here in seg.groupby(by, sort=sort):
+        group = group if isinstance(group, tuple) else (group,)
+        for kind in [k for k in kinds if k in set(here.kind)]:  # (an env without items has no PickItem)
+            cells = []
+            for m in pair:
+                key = (m, *group, kind)
+                if key not in t.index or (m, *group) not in n_ep.index:
+                    cells += ["–"] * len(DECOMPOSITION_HEAD)
+                    continue
+                r, n = t.loc[key], n_ep[(m, *group)]
+                cells += [f"{r.n / n:.2f}", f"{r.steps / n:.1f} ({r.optimal / n:.1f})", f"{r['first']:.3f}",
+                          f"{r.reached:.3f}"]
+            rows.append([*group, kind, *cells])
+    return rows
+
+
 def decomposition_lines(results: Path, method: str) -> list[str]:
     """Where a plan-following DT's steps go, beside the hand-written controllers under the same planner (the
     floor a perfect executor of those sub-goals reaches): per kind of sub-goal, the steps spent per episode
@@ -465,28 +494,15 @@ def decomposition_lines(results: Path, method: str) -> list[str]:
     episodes = pd.read_csv(ep_path)
     episodes = episodes[episodes.method.isin(pair)]
     n_ep = episodes.groupby(["method", "env", "fail_prob"]).size()
-    seg = seg.assign(kind=seg.operator.str.extract(r"^(\w+)", expand=False))
-    t = step_decomposition(seg, ["method", "env", "fail_prob"])
-    kinds = sorted(set(seg.kind), key=lambda k: (k not in ("Move", "GoTo"), k))
-    head = ["segments / episode", "steps / episode (minimum)", "first action right", "reached"]
     lines = [f"Where the steps of {_label(method)} go, beside {_label(pair[1])} (the same planner, "
              "hand-written controllers: the floor of this design), per kind of sub-goal; steps per "
              "episode against the minimum expected for the sub-goals set (1 / (1 − fail_prob) per Move, 1 per "
              "pick / open), all seeds (`results/segments.csv`):", "",
-             "| env | fail_prob | sub-goal | " + " | ".join(f"{h}: {m}" for m in ("DT", "controllers") for h in head)
-             + " |", "|---|---|---|" + "---|" * 2 * len(head)]
-    for (env, fp), here in seg.groupby(["env", "fail_prob"], sort=True):
-        for kind in [k for k in kinds if k in set(here.kind)]:  # (an env without items has no PickItem)
-            cells = []
-            for m in pair:
-                key = (m, env, fp, kind)
-                if key not in t.index or (m, env, fp) not in n_ep.index:
-                    cells += ["–"] * len(head)
-                    continue
-                r, n = t.loc[key], n_ep[(m, env, fp)]
-                cells += [f"{r.n / n:.2f}", f"{r.steps / n:.1f} ({r.optimal / n:.1f})", f"{r['first']:.3f}",
-                          f"{r.reached:.3f}"]
-            lines.append(f"| {env} | {fp:g} | {kind} | " + " | ".join(cells) + " |")
+             "| env | fail_prob | sub-goal | " + " | ".join(f"{h}: {m}" for m in ("DT", "controllers")
+                                                          for h in DECOMPOSITION_HEAD)
+             + " |", "|---|---|---|" + "---|" * 2 * len(DECOMPOSITION_HEAD)]
+    for env, fp, kind, *cells in decomposition_cells(seg, n_ep, ["env", "fail_prob"], pair):
+        lines.append(f"| {env} | {fp:g} | {kind} | " + " | ".join(cells) + " |")
     reasons = [f"replans_{r}" for r in REPLAN_REASONS]
     if set(reasons) <= set(episodes.columns):
         per = episodes.groupby(["env", "fail_prob", "method"])[["steps", *reasons]].mean()
@@ -587,10 +603,11 @@ SPLIT_LABELS = {"train": "training layouts", "heldout": "held-out layouts", "min
 TARGET_SUCCESS, TARGET_STEPS = 0.95, 1.10  # HNSDT on maps it never saw: of the optimum's success, its steps
 
 
-def target_lines(summ: pd.DataFrame, method: str = PROPOSED) -> list[str]:
+def target_lines(summ: pd.DataFrame, method: str = PROPOSED, why: dict | None = None) -> list[str]:
     """Per unseen split, whether ``method`` reaches ``TARGET_SUCCESS`` × the exact optimum's success and at most
     ``TARGET_STEPS`` × its expected steps at every failure probability (each a mean over seeds), and if not,
-    by how much at its worst failure probability."""
+    by how much at its worst failure probability, and (``why``, :func:`unseen_decomposition`) how its GoTo
+    sub-goals went there."""
     out = []
     for split, d in summ[(summ.method == method) & (summ.split != "train")].groupby("split", sort=False):
         share = d.success_mean / d.optimal_success
@@ -598,10 +615,45 @@ def target_lines(summ: pd.DataFrame, method: str = PROPOSED) -> list[str]:
         met = share.min() >= TARGET_SUCCESS and worst_steps.steps_ratio_mean <= TARGET_STEPS
         steps = (f"most steps {worst_steps.steps_ratio_mean:.2f}× the optimum's (fail_prob {worst_steps.fail_prob:g})"
                  if d.steps_ratio_mean.notna().any() else "no episode reached the exit")
-        out.append(f"{SPLIT_LABELS.get(split, split)}: " + ("met" if met else "short") +
-                   f" — lowest success {share.min():.3f} of the optimum's (fail_prob {worst_share.fail_prob:g}), "
-                   + steps)
+        line = (f"{SPLIT_LABELS.get(split, split)}: " + ("met" if met else "short") +
+                f" — lowest success {share.min():.3f} of the optimum's (fail_prob {worst_share.fail_prob:g}), " + steps)
+        if not met and why and split in why:
+            ratio, right, reached, overran, ended = why[split]
+            line += (f"; measured cause: its GoTo sub-goals took {ratio:.2f}× their minimum steps, {right:.3f} of "
+                     f"their actions on a shortest path; {reached:.3f} were reached within their allowance, "
+                     f"{overran:.3f} overran it (replanned), {ended:.3f} were still open at the step limit")
+        out.append(line)
     return out
+
+
+def unseen_decomposition(results: Path, method: str = PROPOSED) -> tuple[list[str], dict]:
+    """Where ``method``'s steps go on the unseen-layout splits, beside the symbolic baseline (the same planner,
+    hand-written controllers): :func:`decomposition_cells` per split, over every seed and failure probability
+    (``segments.csv``); and per split the measured cause behind :func:`target_lines`: ``{split: (steps / minimum
+    of its GoTo sub-goals, share of their actions on a shortest path, shares achieved, overran and still open
+    at the episode's end)}``."""
+    from hnsdt.methods import CONTROLLER_FLOOR
+
+    seg_path = results / "segments.csv"
+    if not seg_path.is_file() or seg_path.stat().st_size < 2:
+        return [], {}
+    seg = pd.read_csv(seg_path)
+    pair = [method, CONTROLLER_FLOOR[method]]
+    if "operator" not in seg or method not in set(seg.method):
+        return [], {}
+    seg = seg[seg.method.isin(pair)]
+    episodes = pd.read_csv(results / "episodes.csv")
+    n_ep = episodes[episodes.method.isin(pair)].groupby(["method", "split"]).size()
+    lines = ["| split | sub-goal | " + " | ".join(f"{h}: {_label(m)}" for m in pair
+                                                 for h in DECOMPOSITION_HEAD) + " |",
+             "|---|---|" + "---|" * 2 * len(DECOMPOSITION_HEAD)]
+    for split, kind, *cells in decomposition_cells(seg, n_ep, ["split"], pair, sort=False):
+        lines.append(f"| {SPLIT_LABELS.get(split, split)} | {kind} | " + " | ".join(cells) + " |")
+    goto = seg[(seg.method == method) & seg.operator.str.startswith("GoTo")]
+    why = {split: (d.steps.sum() / d.optimal_steps.sum(), d.right_actions.sum() / d.steps.sum(),
+                   *(d.outcome.eq(o).mean() for o in ("achieved", "overran", "ended")))
+           for split, d in goto.groupby("split", sort=False)}
+    return lines, why
 
 
 def generalisation_table(summ: pd.DataFrame) -> pd.DataFrame:
@@ -661,6 +713,7 @@ def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
     episodes = pd.read_csv(results / "episodes.csv")
     table = generalisation_table(summ)
     generalisation_figure(table, figure)
+    steps, why = unseen_decomposition(results)
     splits = list(dict.fromkeys(table.split))
     head = "| method | " + " | ".join(f"{SPLIT_LABELS.get(s, s)}: success | steps / opt" for s in splits)
     lines = [head + " | held-out / training success |", "|---" * (2 * len(splits) + 2) + "|"]
@@ -684,7 +737,8 @@ def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
 
     sizes = {s: f"{span(d.rows)} × {span(d.cols)}" for s, d in layouts.groupby("split")}
     return {"generalisation_table": "\n".join(lines), "generalisation_detail": "\n".join(detail),
-            "generalisation_targets": target_lines(summ),
+            "generalisation_targets": target_lines(summ, why=why),
+            "generalisation_steps": "\n".join(steps),
             "generalisation_validation": g.validation_layouts if g else 0,
             "generalisation_validation_families": list(g.validation_families) if g else [],
             "generalisation_family": g.family if g else "?", "generalisation_train": g.train_layouts if g else "?",
