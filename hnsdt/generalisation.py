@@ -25,7 +25,7 @@ Protocol (``generalisation`` in params.yaml; README, "Unseen layouts"):
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass, fields, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -219,7 +219,8 @@ def network_configs(params: Params, method: str, seed: int):
     budget = g.budgets.get(method, {})  # its env_steps stand in for any family, whatever baselines.<method> maps
     own = (f"generalisation.budgets.{method}.env_steps", budget["env_steps"]) if "env_steps" in budget else None
     bs = baseline_settings(params, method, env, seed, env_steps=own)
-    return view_cls(**asdict(bs.model), view_radius=g.view_radius), _budget(params, method, bs.train)
+    encoder = {"conv_layers": g.conv_layers} if "conv_layers" in {f.name for f in fields(view_cls)} else {}
+    return view_cls(**asdict(bs.model), view_radius=g.view_radius, **encoder), _budget(params, method, bs.train)
 
 
 def _budget_on_validation_layouts(params: Params, method: str) -> bool:

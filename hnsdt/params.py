@@ -180,8 +180,9 @@ class GeneralisationParams(Section):
                                     "maps it is evaluated on")
     max_steps: PositiveInt = Field(description="episode step limit on generated layouts")
     view_radius: PositiveInt = Field(2, description="the learners see (2r+1) x (2r+1) cells around the agent")
-    conv_layers: int = Field(0, ge=0, description="the decision transformers' view encoder: this many 3x3 "
-                             "convolutions before the projection (0: the cell embeddings flattened)")
+    conv_layers: int = Field(0, ge=0, description="the view encoder of the decision transformers and the LSTM / "
+                             "GRU: this many 3x3 convolutions before the projection (0: the cell embeddings "
+                             "flattened)")
     value_iterations: int = Field(0, ge=0, description="the decision transformers' view encoder: > 0 plans over "
                                   "the view towards the sub-goal's target with a value-iteration module of this "
                                   "many backups (0: none)")

@@ -230,6 +230,24 @@ def test_the_convolutional_view_encoder_reads_a_pattern_alike_wherever_it_sits()
     assert plain.convs is None and plain.view_proj.in_features == side * side * 4
 
 
+def test_the_lstm_and_gru_read_the_decision_transformers_view_encoder(tmp_path):
+    """One encoder per experiment: with ``generalisation.conv_layers`` the recurrent baselines' view networks
+    get the same convolutions as the decision transformers' (the online learners keep their one-hot MLP)."""
+    import torch
+
+    from hnsdt import generalisation as gen
+    from hnsdt.methods import METHODS, resolve
+
+    params = _tiny_generalisation_params(tmp_path)
+    params["generalisation"].update(conv_layers=2)
+    dt, _ = gen.network_configs(validate(params), "hnsdt", 0)
+    for method in ("lstm_hier", "gru"):
+        cfg, _ = gen.network_configs(validate(params), method, 0)
+        assert cfg.conv_layers == dt.conv_layers == 2
+        model = resolve(METHODS[method].view_network)(cfg)
+        assert len([m for m in model.view.convs if isinstance(m, torch.nn.Conv2d)]) == 2
+
+
 def test_the_value_iteration_encoder_marks_the_target_and_plans_around_walls():
     """``generalisation.value_iterations``: the target's mark sits at its offset in the view (at the edge, the
     direction kept, when it lies beyond; none: no mark), and the backups spread value along floor, not through

@@ -204,12 +204,14 @@ class ViewDecisionTransformer(ViewModel, DecisionTransformer, arch="view_decisio
 class ViewRecurrentConfig(RecurrentConfig):
     view_radius: int = 2
     code_dim: int = 16
+    conv_layers: int = 0  # 3x3 convolutions over the view first: the decision transformers' encoder (no value
+    #                       iterations: those plan towards a sub-goal's target, which these controllers never read)
 
 
 class ViewRecurrentPolicy(ViewModel, RecurrentPolicy, arch="view_recurrent", config=ViewRecurrentConfig):
     def build_state_encoder(self, width: int) -> None:
         cfg = self.cfg
-        self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, width)
+        self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, width, cfg.conv_layers)
 
     def embed_states(self, states: torch.Tensor) -> torch.Tensor:
         return self.view(states)
