@@ -210,7 +210,7 @@ def network_configs(params: Params, method: str, seed: int):
                               **models[g.family].model_dump())
         except ValueError as e:
             raise params.error(f"models.{g.family}: {e}") from None
-        train_cfg = ts.method_config(method, seed)
+        train_cfg = replace(ts.method_config(method, seed), symmetries=g.symmetries)
         if _budget_on_validation_layouts(params, method):  # the measure acts on the validation layouts:
             train_cfg = replace(train_cfg, validation=0.0)  # every training episode trains
         elif ts.measure.get(method, ("loss",))[0] != "loss":  # acting from held-out states needs one fixed map:

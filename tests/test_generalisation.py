@@ -533,7 +533,7 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
 
     params = _tiny_generalisation_params(tmp_path)
     g = params["generalisation"]
-    g.update(methods=["hnsdt"], baselines=["gru", "dqn"])
+    g.update(methods=["hnsdt"], baselines=["gru", "dqn"], symmetries=8)  # (the DTs on turned maps)
     (tmp_path / "drawn").mkdir()  # one hand-drawn map, of a size no training layout has
     (tmp_path / "drawn/corridor.txt").write_text((REPO / "layouts/drawn/corridor_5x13.txt").read_text())
     g["drawn"]["folder"] = str(tmp_path / "drawn")
@@ -825,3 +825,67 @@ def test_the_learners_own_states_are_labelled_with_the_controllers_way_to_its_su
     joined = join_frames(frames, frames)
     assert len(joined) == 2 * len(frames) and joined.episode.max() + 1 == 16
     assert (joined.actions[len(frames):] == frames.actions).all()
+
+
+def _turned_text(text: str, k: int) -> str:
+    """A layout's grid turned k % 4 quarter turns clockwise, then mirrored left to right when k >= 4."""
+    grid = np.array([list(row) for row in text.strip("\n").splitlines()])
+    grid = np.rot90(grid, k=-(k % 4))
+    grid = grid[:, ::-1] if k >= 4 else grid
+    return "\n".join("".join(row) for row in grid) + "\n"
+
+
+def _turned_cell(cells: np.ndarray, shape: tuple[int, int], k: int) -> np.ndarray:
+    """Where cells (…, 2) of a grid of ``shape`` lie on :func:`_turned_text`'s grid."""
+    (h, w), r, c = shape, cells[..., 0], cells[..., 1]
+    for _ in range(k % 4):
+        r, c, h, w = c, h - 1 - r, w, h
+    return np.stack([r, w - 1 - c if k >= 4 else c], axis=-1)
+
+
+@pytest.mark.parametrize("k", range(8))
+def test_a_turned_episode_is_an_episode_of_the_turned_map(k):
+    """``generalisation.symmetries``: an episode turned (and mirrored) by :func:`turn_episodes` is what the same
+    controllers' moves do on the map turned the same way: its actions, replayed there, reach the exit, and every
+    step's view, flags and agent-to-target offset are the turned episode's."""
+    from hnsdt.agents import SymbolicAgent, rollout
+    from hnsdt.envs.observation import view_states
+    from hnsdt.models.view import turn_episodes
+
+    layout = load_layout((REPO / "layouts/drawn/spiral_9x9.txt").read_text())  # not square-symmetric: a spiral
+    (ep,) = rollout(KeyDoorVectorEnv(1, layout, 0.0, 150), SymbolicAgent(layout), seed=0)
+    radius, T = 2, ep.length
+    batch = {"states": view_states(layout, ep.states[:T], radius)[None], "actions": ep.actions[None],
+             "subgoal_targets": ep.subgoal_targets[None]}
+    out = turn_episodes(batch, radius, np.array([k]))
+    turned = load_layout(_turned_text(layout.text, k))
+    env = KeyDoorVectorEnv(1, turned, 0.0, 150)
+    obs, _ = env.reset(seed=0)
+    states = [obs[0]]
+    for a in out["actions"][0]:
+        obs, *_ = env.step(np.array([a]))
+        states.append(obs[0])
+    assert env.terminated[0] and len(states) == T + 1  # the turned moves reach the turned exit, as fast
+    there = view_states(turned, np.array(states[:T]), radius)
+    assert np.array_equal(there[:, 2:], out["states"][0][:, 2:])  # every view and the flags
+    targets = _turned_cell(ep.subgoal_targets, layout.shape, k)  # the sub-goals' cells on the turned map
+    has = ep.subgoal_targets[:, 0] >= 0
+    assert has.any() and np.array_equal((targets - there[:, :2])[has],
+                                        (out["subgoal_targets"][0] - out["states"][0][:, :2])[has])
+    assert k == 0 or not np.array_equal(out["actions"], batch["actions"])
+
+
+def test_turned_maps_need_a_network_that_reads_views():
+    """``symmetries`` > 1 on the paper's state (absolute cells): one error line naming the problem; a bad count
+    is refused by the params schema."""
+    from hnsdt.models.dt import DTConfig
+    from hnsdt.models.train import TrainConfig, turned_maps
+
+    paper_state = DTConfig(condition="subgoal", n_flags=2, grid_h=5, grid_w=5, formulation="episode")
+    with pytest.raises(ValueError, match="symmetries > 1 turns maps: it needs a network that reads views"):
+        turned_maps(paper_state, TrainConfig(symmetries=4))
+    assert turned_maps(paper_state, TrainConfig()) is None
+    params = yaml.safe_load((REPO / "params.yaml").read_text())
+    params["generalisation"]["symmetries"] = 3
+    with pytest.raises(ValueError, match=r"generalisation.symmetries: Input should be 1, 4 or 8"):
+        validate(params)

@@ -63,6 +63,9 @@ class Objective:
     clip_grad_norm: float = 0.0  # > 0: clip the gradient's norm to this before each step
     sizes: np.ndarray | None = None  # per example, what it counts towards batch_size (episodes: their steps);
     #                                  None: one each, so a batch is batch_size examples
+    augment: Callable[[dict, np.ndarray, int], dict] | None = None  # augment(arrays, rows, epoch): a training
+    #                                  batch changed as a function of its rows and epoch alone (so a run resumed
+    #                                  in another process draws the same), e.g. turned maps (hnsdt.models.view)
 
     def batches(self, order: np.ndarray, batch_size: int) -> list[np.ndarray]:
         """One epoch's batches of the shuffled ``order``: slices of ``batch_size`` examples, or (``sizes``) runs
@@ -129,7 +132,10 @@ def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_step
             if step >= total:
                 complete = False
                 break
-            batch = to_device(objective.batch(rows), device)
+            arrays = objective.batch(rows)
+            if objective.augment is not None:
+                arrays = objective.augment(arrays, rows, epoch)
+            batch = to_device(arrays, device)
             loss = model.loss(batch)
             opt.zero_grad(set_to_none=True)
             loss.backward()

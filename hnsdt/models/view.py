@@ -146,6 +146,54 @@ class ViewModel:
         return view_states(layout, obs, self.cfg.view_radius)
 
 
+# -- symmetries: the same episodes on the map turned and mirrored ----------------------------------------
+
+SYMMETRIES = (1, 4, 8)  # none; the four quarter turns; those and their mirror images
+FAR = 4096  # turned cells are (col, FAR - row): never negative (-1 means "no target"), offsets between them exact
+
+
+def turn_episodes(batch: dict[str, np.ndarray], radius: int, k: np.ndarray) -> dict[str, np.ndarray]:
+    """Episodes of view states (:func:`hnsdt.models.windows.make_episodes`) as they would have run on their map
+    turned ``k % 4`` quarter turns clockwise, then mirrored left to right when ``k >= 4`` (``k``: one per
+    episode): the world's rules are the same in every direction, so each is an episode of that map. The views
+    turn with the map, the moves turn with it (up becomes right), the agent's cell and the sub-goal targets turn
+    about a far origin, so the offsets between them — all a view network reads of them — are the turned ones.
+    Flags, picks, timesteps and the conditioning's ids and returns stay."""
+    out = dict(batch)
+    side = 2 * radius + 1
+    states = batch["states"].copy()
+    codes = states[..., 2:2 + side * side].reshape(*states.shape[:-1], side, side)
+    cells, actions = states[..., :2], batch["actions"].copy()
+    targets = batch["subgoal_targets"].copy() if "subgoal_targets" in batch else None
+    for i, ki in enumerate(np.asarray(k)):
+        turns, mirror = int(ki) % 4, int(ki) >= 4
+        view = np.rot90(codes[i], k=-turns, axes=(-2, -1))
+        codes[i] = view[..., ::-1] if mirror else view
+        moves = actions[i] < 4
+        turned = (actions[i] + turns) % 4
+        actions[i] = np.where(moves, (4 - turned) % 4 if mirror else turned, actions[i])
+        cells[i] = _turn_cells(cells[i], turns, mirror)
+        if targets is not None:
+            targets[i] = np.where(targets[i] >= 0, _turn_cells(targets[i], turns, mirror), targets[i])
+    states[..., 2:2 + side * side] = codes.reshape(*states.shape[:-1], side * side)
+    states[..., :2] = cells
+    out.update(states=states, actions=actions)
+    if targets is not None:
+        out["subgoal_targets"] = targets
+    return out
+
+
+def _turn_cells(cells: np.ndarray, turns: int, mirror: bool) -> np.ndarray:
+    """(…, 2) (row, col) after ``turns`` clockwise quarter turns, (r, c) -> (c, FAR - r), then the mirror
+    (r, c) -> (r, FAR - c)."""
+    r, c = cells[..., 0], cells[..., 1]
+    for _ in range(turns):
+        r, c = c, FAR - r
+    if mirror:
+        c = FAR - c
+    return np.stack([r, c], axis=-1)
+
+
 # -- decision transformer (HNSDT, pure DT) ---------------------------------------------------------------
 
 @dataclass
