@@ -220,7 +220,10 @@ def network_configs(params: Params, method: str, seed: int):
     own = (f"generalisation.budgets.{method}.env_steps", budget["env_steps"]) if "env_steps" in budget else None
     bs = baseline_settings(params, method, env, seed, env_steps=own)
     encoder = {"conv_layers": g.conv_layers} if "conv_layers" in {f.name for f in fields(view_cls)} else {}
-    return view_cls(**asdict(bs.model), view_radius=g.view_radius, **encoder), _budget(params, method, bs.train)
+    train_cfg = bs.train  # (an offline learner trains on episodes: on turned maps too)
+    if "symmetries" in {f.name for f in fields(train_cfg)}:
+        train_cfg = replace(train_cfg, symmetries=g.symmetries)
+    return view_cls(**asdict(bs.model), view_radius=g.view_radius, **encoder), _budget(params, method, train_cfg)
 
 
 def _budget_on_validation_layouts(params: Params, method: str) -> bool:

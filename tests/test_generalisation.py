@@ -850,14 +850,18 @@ def test_a_turned_episode_is_an_episode_of_the_turned_map(k):
     step's view, flags and agent-to-target offset are the turned episode's."""
     from hnsdt.agents import SymbolicAgent, rollout
     from hnsdt.envs.observation import view_states
+    from hnsdt.models.recurrent import START_ACTION
     from hnsdt.models.view import turn_episodes
 
     layout = load_layout((REPO / "layouts/drawn/spiral_9x9.txt").read_text())  # not square-symmetric: a spiral
     (ep,) = rollout(KeyDoorVectorEnv(1, layout, 0.0, 150), SymbolicAgent(layout), seed=0)
     radius, T = 2, ep.length
     batch = {"states": view_states(layout, ep.states[:T], radius)[None], "actions": ep.actions[None],
-             "subgoal_targets": ep.subgoal_targets[None]}
+             "subgoal_targets": ep.subgoal_targets[None],
+             "prev_actions": np.r_[START_ACTION, ep.actions[:-1]][None]}  # (the recurrent controllers' input)
     out = turn_episodes(batch, radius, np.array([k]))
+    assert out["prev_actions"][0, 0] == START_ACTION and np.array_equal(out["prev_actions"][0, 1:],
+                                                                        out["actions"][0, :-1])
     turned = load_layout(_turned_text(layout.text, k))
     env = KeyDoorVectorEnv(1, turned, 0.0, 150)
     obs, _ = env.reset(seed=0)
@@ -879,12 +883,12 @@ def test_turned_maps_need_a_network_that_reads_views():
     """``symmetries`` > 1 on the paper's state (absolute cells): one error line naming the problem; a bad count
     is refused by the params schema."""
     from hnsdt.models.dt import DTConfig
-    from hnsdt.models.train import TrainConfig, turned_maps
+    from hnsdt.models.view import turned_maps
 
     paper_state = DTConfig(condition="subgoal", n_flags=2, grid_h=5, grid_w=5, formulation="episode")
     with pytest.raises(ValueError, match="symmetries > 1 turns maps: it needs a network that reads views"):
-        turned_maps(paper_state, TrainConfig(symmetries=4))
-    assert turned_maps(paper_state, TrainConfig()) is None
+        turned_maps(paper_state, 4, 0)
+    assert turned_maps(paper_state, 1, 0) is None
     params = yaml.safe_load((REPO / "params.yaml").read_text())
     params["generalisation"]["symmetries"] = 3
     with pytest.raises(ValueError, match=r"generalisation.symmetries: Input should be 1, 4 or 8"):

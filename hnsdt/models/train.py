@@ -61,11 +61,16 @@ def objective_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, part: s
         if len(starts) == 0:
             raise ValueError(f"no {part} episodes: no {model_cfg.condition} episodes from behaviours "
                              f"{list(cfg.behaviours) or 'any'} in the dataset")
+        augment = None
+        if part == "train" and cfg.symmetries != 1:  # (the view networks' module: no stage of the paper's map needs it)
+            from hnsdt.models.view import turned_maps
+
+            augment = turned_maps(model_cfg, cfg.symmetries, cfg.seed)
         return Objective(np.arange(len(starts)),
                          lambda rows: make_episodes(frames, starts[rows], lengths[rows], model_cfg.condition,
                                                     supervised),
                          lambda rows: int(lengths[rows].sum()), row, sizes=lengths,
-                         augment=turned_maps(model_cfg, cfg) if part == "train" else None)
+                         augment=augment)
     ends = window_ends(frames, model_cfg.condition, cfg.behaviours, cfg.loss)
     ends = ends[held[ends]]
     if len(ends) == 0:
@@ -73,27 +78,6 @@ def objective_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, part: s
                          f"{list(cfg.behaviours) or 'any'} in the dataset")
     return Objective(ends, lambda rows: make_windows(frames, rows, model_cfg.context, model_cfg.condition,
                                                      cfg.loss), len, row)
-
-
-def turned_maps(model_cfg: DTConfig, cfg: TrainConfig):
-    """``cfg.symmetries`` > 1: the augmentation that gives each training episode a random turn (and mirror) of
-    its map, drawn from the seed, the epoch and the batch's first episode (:func:`hnsdt.models.view.turn_episodes`);
-    None otherwise."""
-    if cfg.symmetries == 1:
-        return None
-    from hnsdt.models.view import SYMMETRIES, turn_episodes
-
-    radius = getattr(model_cfg, "view_radius", None)
-    if cfg.symmetries not in SYMMETRIES:
-        raise ValueError(f"symmetries must be one of {SYMMETRIES}, got {cfg.symmetries}")
-    if radius is None or model_cfg.formulation != "episode":
-        raise ValueError("symmetries > 1 turns maps: it needs a network that reads views (no absolute cells) and "
-                         "the episode formulation")
-
-    def augment(arrays: dict, rows: np.ndarray, epoch: int) -> dict:
-        k = np.random.default_rng([cfg.seed, epoch, 4099, int(rows[0])]).integers(0, cfg.symmetries, len(rows))
-        return turn_episodes(arrays, radius, k)
-    return augment
 
 
 def validation_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, measure=None) -> Validation | None:

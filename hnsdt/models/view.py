@@ -158,29 +158,50 @@ def turn_episodes(batch: dict[str, np.ndarray], radius: int, k: np.ndarray) -> d
     episode): the world's rules are the same in every direction, so each is an episode of that map. The views
     turn with the map, the moves turn with it (up becomes right), the agent's cell and the sub-goal targets turn
     about a far origin, so the offsets between them — all a view network reads of them — are the turned ones.
-    Flags, picks, timesteps and the conditioning's ids and returns stay."""
+    Flags, picks, timesteps and the conditioning's ids and returns stay; so do the markers of "no action yet"
+    (``prev_actions`` of the recurrent controllers)."""
     out = dict(batch)
     side = 2 * radius + 1
     states = batch["states"].copy()
     codes = states[..., 2:2 + side * side].reshape(*states.shape[:-1], side, side)
-    cells, actions = states[..., :2], batch["actions"].copy()
+    cells = states[..., :2]
+    actions = {key: batch[key].copy() for key in ("actions", "prev_actions") if key in batch}
     targets = batch["subgoal_targets"].copy() if "subgoal_targets" in batch else None
     for i, ki in enumerate(np.asarray(k)):
         turns, mirror = int(ki) % 4, int(ki) >= 4
         view = np.rot90(codes[i], k=-turns, axes=(-2, -1))
         codes[i] = view[..., ::-1] if mirror else view
-        moves = actions[i] < 4
-        turned = (actions[i] + turns) % 4
-        actions[i] = np.where(moves, (4 - turned) % 4 if mirror else turned, actions[i])
+        for a in actions.values():
+            turned = (a[i] + turns) % 4
+            a[i] = np.where(a[i] < 4, (4 - turned) % 4 if mirror else turned, a[i])  # moves; pick and markers stay
         cells[i] = _turn_cells(cells[i], turns, mirror)
         if targets is not None:
             targets[i] = np.where(targets[i] >= 0, _turn_cells(targets[i], turns, mirror), targets[i])
     states[..., 2:2 + side * side] = codes.reshape(*states.shape[:-1], side * side)
     states[..., :2] = cells
-    out.update(states=states, actions=actions)
+    out.update(states=states, **actions)
     if targets is not None:
         out["subgoal_targets"] = targets
     return out
+
+
+def turned_maps(model_cfg, symmetries: int, seed: int):
+    """The training augmentation of ``symmetries`` > 1 (:class:`hnsdt.models.fit.Objective`'s ``augment``): each
+    episode of a batch on its map turned (and mirrored) at random (:func:`turn_episodes`), drawn from the seed,
+    the epoch and the batch's first episode; None for 1."""
+    if symmetries == 1:
+        return None
+    if symmetries not in SYMMETRIES:
+        raise ValueError(f"symmetries must be one of {SYMMETRIES}, got {symmetries}")
+    radius = getattr(model_cfg, "view_radius", None)
+    if radius is None or getattr(model_cfg, "formulation", "episode") != "episode":
+        raise ValueError("symmetries > 1 turns maps: it needs a network that reads views (no absolute cells) and "
+                         "whole episodes (the episode formulation)")
+
+    def augment(arrays: dict, rows: np.ndarray, epoch: int) -> dict:
+        k = np.random.default_rng([seed, epoch, 4099, int(rows[0])]).integers(0, symmetries, len(rows))
+        return turn_episodes(arrays, radius, k)
+    return augment
 
 
 def _turn_cells(cells: np.ndarray, turns: int, mirror: bool) -> np.ndarray:

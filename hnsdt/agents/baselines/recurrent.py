@@ -16,6 +16,7 @@ import torch
 from hnsdt.models.windows import Frames
 from hnsdt.models.fit import FitState, Objective, fit
 from hnsdt.models.recurrent import START_ACTION, RecurrentConfig, RecurrentPolicy
+from hnsdt.models.view import turned_maps
 
 
 @dataclass
@@ -28,6 +29,8 @@ class RecurrentTrainConfig:
     device: str = "cpu"
     log_every: int = 10  # one training-curve row per this many steps
     behaviours: tuple[str, ...] = ()  # collection behaviours to learn from (empty = all)
+    symmetries: int = 1  # each episode, every epoch anew, on its map turned at random (view networks only;
+    #                      hnsdt.models.view.turned_maps)
 
 
 def training_episodes(frames: Frames, behaviours=()) -> tuple[np.ndarray, np.ndarray]:
@@ -65,7 +68,7 @@ def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTr
         np.arange(len(starts)), lambda rows: episode_batch(frames, starts[rows], lengths[rows]),
         lambda rows: int(lengths[rows].sum()),
         lambda step, epoch, seen, loss: {"step": step, "epoch": step / per_epoch, "frames_seen": seen, "loss": loss},
-        clip_grad_norm=1.0)
+        clip_grad_norm=1.0, augment=turned_maps(model_cfg, cfg.symmetries, cfg.seed))
     out = fit(network, model_cfg, objective, epochs=cfg.epochs, max_steps=cfg.max_steps, batch_size=cfg.batch_size,
               lr=cfg.lr, seed=cfg.seed, device=torch.device(cfg.device), log_every=cfg.log_every,
               progress=progress, desc=desc, state=state, stop_after=stop_after)
