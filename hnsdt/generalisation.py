@@ -25,7 +25,7 @@ Protocol (``generalisation`` in params.yaml; README, "Unseen layouts"):
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -219,11 +219,10 @@ def network_configs(params: Params, method: str, seed: int):
     budget = g.budgets.get(method, {})  # its env_steps stand in for any family, whatever baselines.<method> maps
     own = (f"generalisation.budgets.{method}.env_steps", budget["env_steps"]) if "env_steps" in budget else None
     bs = baseline_settings(params, method, env, seed, env_steps=own)
-    encoder = {"conv_layers": g.conv_layers} if "conv_layers" in {f.name for f in fields(view_cls)} else {}
-    train_cfg = bs.train  # (an offline learner trains on episodes: on turned maps too)
-    if "symmetries" in {f.name for f in fields(train_cfg)}:
-        train_cfg = replace(train_cfg, symmetries=g.symmetries)
-    return view_cls(**asdict(bs.model), view_radius=g.view_radius, **encoder), _budget(params, method, train_cfg)
+    encoder = {"conv_layers": g.conv_layers} if hasattr(view_cls, "conv_layers") else {}  # (the LSTM's, GRU's)
+    turned = {"symmetries": g.symmetries} if hasattr(bs.train, "symmetries") else {}  # (offline: episodes)
+    return view_cls(**asdict(bs.model), view_radius=g.view_radius, **encoder), _budget(
+        params, method, replace(bs.train, **turned))
 
 
 def _budget_on_validation_layouts(params: Params, method: str) -> bool:
@@ -307,13 +306,14 @@ def layout_rows(task, batch, episodes) -> tuple[list[dict], list[dict]]:
     from hnsdt.evaluation.evaluate import layout_navigator, segment_facts
 
     src, per_fail_prob = batch.key
+    navigator = layout_navigator(src.layout) if any(ep.segments for ep in episodes) else None
     rows, segments = [], []
     for i, ep in enumerate(episodes):
         ids = {"method": task.method, "seed": task.seed, "split": src.split, "layout": src.name,
                "fail_prob": float(batch.fail_prob[i]), "episode": i % per_fail_prob}
         rows.append(ids | {"success": bool(ep.success), "steps": ep.length, "reward": round(ep.ret, 6)})
         if ep.segments:
-            segments += [ids | row for row in segment_facts(ep, layout_navigator(src.layout), ids["fail_prob"])]
+            segments += [ids | row for row in segment_facts(ep, navigator, ids["fail_prob"])]
     return rows, segments
 
 

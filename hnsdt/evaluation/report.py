@@ -626,12 +626,12 @@ def target_lines(summ: pd.DataFrame, method: str = PROPOSED, why: dict | None = 
     return out
 
 
-def unseen_decomposition(results: Path, method: str = PROPOSED) -> tuple[list[str], dict]:
+def unseen_decomposition(results: Path, episodes: pd.DataFrame, method: str = PROPOSED) -> tuple[list[str], dict]:
     """Where ``method``'s steps go on the unseen-layout splits, beside the symbolic baseline (the same planner,
     hand-written controllers): :func:`decomposition_cells` per split, over every seed and failure probability
-    (``segments.csv``); and per split the measured cause behind :func:`target_lines`: ``{split: (steps / minimum
-    of its GoTo sub-goals, share of their actions on a shortest path, shares achieved, overran and still open
-    at the episode's end)}``."""
+    (``segments.csv``; ``episodes``: the ``episodes.csv`` beside it); and per split the measured cause behind
+    :func:`target_lines`: ``{split: (steps / minimum of its GoTo sub-goals, share of their actions on a shortest
+    path, shares achieved, overran and still open at the episode's end)}``."""
     from hnsdt.methods import CONTROLLER_FLOOR
 
     seg_path = results / "segments.csv"
@@ -642,7 +642,6 @@ def unseen_decomposition(results: Path, method: str = PROPOSED) -> tuple[list[st
     if "operator" not in seg or method not in set(seg.method):
         return [], {}
     seg = seg[seg.method.isin(pair)]
-    episodes = pd.read_csv(results / "episodes.csv")
     n_ep = episodes[episodes.method.isin(pair)].groupby(["method", "split"]).size()
     lines = ["| split | sub-goal | " + " | ".join(f"{h}: {_label(m)}" for m in pair
                                                  for h in DECOMPOSITION_HEAD) + " |",
@@ -713,7 +712,7 @@ def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
     episodes = pd.read_csv(results / "episodes.csv")
     table = generalisation_table(summ)
     generalisation_figure(table, figure)
-    steps, why = unseen_decomposition(results)
+    steps, why = unseen_decomposition(results, episodes)
     splits = list(dict.fromkeys(table.split))
     head = "| method | " + " | ".join(f"{SPLIT_LABELS.get(s, s)}: success | steps / opt" for s in splits)
     lines = [head + " | held-out / training success |", "|---" * (2 * len(splits) + 2) + "|"]

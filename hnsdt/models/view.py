@@ -177,8 +177,7 @@ def turn_episodes(batch: dict[str, np.ndarray], radius: int, k: np.ndarray) -> d
         cells[i] = _turn_cells(cells[i], turns, mirror)
         if targets is not None:
             targets[i] = np.where(targets[i] >= 0, _turn_cells(targets[i], turns, mirror), targets[i])
-    states[..., 2:2 + side * side] = codes.reshape(*states.shape[:-1], side * side)
-    states[..., :2] = cells
+    states[..., 2:2 + side * side] = codes.reshape(*states.shape[:-1], side * side)  # (cells: a view of states)
     out.update(states=states, **actions)
     if targets is not None:
         out["subgoal_targets"] = targets
