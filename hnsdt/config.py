@@ -25,7 +25,7 @@ from hnsdt.methods import BASELINES, DT_METHODS, METHODS, PROPOSED, resolve
 from hnsdt.params import SECTIONS, Params, ParamsError, validate
 
 __all__ = ["ParamsError", "Params", "load_params", "EnvSpec", "env_spec", "executor_config", "method_executor",
-           "collect_config", "model_config", "TrainSettings", "train_settings", "BaselineSettings",
+           "collect_config", "layout_collect_config", "model_config", "TrainSettings", "train_settings", "BaselineSettings",
            "baseline_settings", "fill", "compute_settings", "EvaluateSettings", "evaluate_settings"]
 
 
@@ -112,6 +112,19 @@ def collect_config(params: Params, name: str) -> CollectConfig:
         fail_probs=[float(f) for f in collect.fail_probs], behaviours=behaviours, seed=collect.seed, fps=collect.fps,
         executor=executor_config(params), license=collect.license, render=collect.render,
     )
+
+
+def layout_collect_config(params: Params) -> CollectConfig:
+    """The unseen-layout experiment's collection on its training layouts (``layout`` is left None): ``collect``'s seed, fps, licence and fail_probs, the
+    noisy planner of ``planner``, ``generalisation.episodes_per_layout`` per start, and
+    ``generalisation.random_episodes_per_layout`` random walks (the paper's arm's data)."""
+    g, collect = params.need("generalisation"), params.need("collect")
+    behaviours = [Behaviour("noisy_planner", g.episodes_per_layout, start, g.epsilon) for start in ("layout", "random")]
+    if g.random_episodes_per_layout:
+        behaviours.append(Behaviour("random", g.random_episodes_per_layout, "random"))
+    return CollectConfig(env_id=f"hnsdt/generated-{g.family}", layout=None, max_steps=g.max_steps,
+                         fail_probs=[float(f) for f in collect.fail_probs], behaviours=behaviours, seed=collect.seed,
+                         fps=collect.fps, executor=executor_config(params), license=collect.license)
 
 
 def model_config(params: Params, env_name: str, method: str):

@@ -11,13 +11,15 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
-from hnsdt.config import (EnvSpec, Params, baseline_settings, env_spec, method_executor, model_config,
+from hnsdt.config import (EnvSpec, Params, baseline_settings, env_spec, fill, method_executor, model_config,
                           train_settings)
+from hnsdt.envs.layout import Layout
 from hnsdt.methods import METHODS, network_for, resolve
+from hnsdt.methods import method as lookup_method
 
 
 @dataclass(frozen=True)
@@ -243,3 +245,105 @@ def _usage_text(usage: dict) -> str:
 def _last_metric(curve: list[dict]) -> str:
     last = curve[-1] if curve else {}
     return ", ".join(f"{k} {last[k]:.4f}" for k in ("loss", "success") if k in last and last[k] == last[k])
+
+
+# -- the unseen-layout experiment: view networks over many layouts ---------------------------------------
+
+def layout_network_configs(params: Params, method: str, seed: int, layout: Layout):
+    """``(view network config, training config)`` of one method and seed of the unseen-layout experiment
+    (``generalisation`` in params.yaml), ``layout`` one of its training layouts (their flags). Nothing in them
+    depends on the maps the method is evaluated on: targets are clamped at ``generalisation.max_offset``,
+    timesteps at the training episodes' limit."""
+    from hnsdt.models.view import view_config
+
+    g = params.need("generalisation")
+    entry = lookup_method(method)
+    if not entry.view_network:
+        raise ValueError(f"generalisation: {method} has no network that reads views")
+    lay = layout
+    env = EnvSpec(g.family, f"hnsdt/generated-{g.family}", lay, g.max_steps)
+    view_cls = resolve(entry.view_network).config_class
+    if entry.stage == "train":  # a decision transformer: `train` and `models.<family>`
+        ts, models = train_settings(params), params.models
+        if g.family not in models:
+            raise params.error(f"missing key models.{g.family} (the decision transformers' size on the "
+                               f"generalisation family {g.family})")
+        try:
+            cfg = view_config(entry.condition, lay.n_flags, g.view_radius, g.max_offset, g.conv_layers,
+                              g.value_iterations, max_timestep=g.max_steps, dropout=params.train.dropout,
+                              formulation=ts.formulation[method],
+                              **models[g.family].model_dump())
+        except ValueError as e:
+            raise params.error(f"models.{g.family}: {e}") from None
+        train_cfg = replace(ts.method_config(method, seed), symmetries=g.symmetries)
+        if _budget_on_validation_layouts(params, method):  # the measure acts on the validation layouts:
+            train_cfg = replace(train_cfg, validation=0.0)  # every training episode trains
+        elif ts.measure.get(method, ("loss",))[0] != "loss":  # acting from held-out states needs one fixed map:
+            train_cfg = replace(train_cfg, validation=0.0, epochs=ts.config.epochs)  # here, train.epochs
+        return cfg, _budget(params, method, train_cfg)
+    budget = g.budgets.get(method, {})  # its env_steps stand in for any family, whatever baselines.<method> maps
+    own = (f"generalisation.budgets.{method}.env_steps", budget["env_steps"]) if "env_steps" in budget else None
+    bs = baseline_settings(params, method, env, seed, env_steps=own)
+    encoder = {"conv_layers": g.conv_layers} if hasattr(view_cls, "conv_layers") else {}  # (the LSTM's, GRU's)
+    turned = {"symmetries": g.symmetries} if hasattr(bs.train, "symmetries") else {}  # (offline: episodes)
+    return view_cls(**asdict(bs.model), view_radius=g.view_radius, **encoder), _budget(
+        params, method, replace(bs.train, **turned))
+
+
+def _budget_on_validation_layouts(params: Params, method: str) -> bool:
+    """Does ``method`` (a DT with a ``train.validation`` entry) stop at the plateau of its steps to the exit on
+    the validation layouts (:class:`hnsdt.training.StepsToExit`)?"""
+    return (lookup_method(method).stage == "train" and params.need("generalisation").validation_layouts > 0
+            and method in params.train.validation)
+
+
+def _budget(params: Params, method: str, train_cfg):
+    """``train_cfg`` with ``generalisation.budgets.<method>`` applied: each key a field of its training config,
+    with the field's type."""
+    key, budget = f"generalisation.budgets.{method}", params.need("generalisation").budgets.get(method, {})
+    allowed = set(vars(train_cfg)) - {"seed", "device", "behaviours"}
+    unknown = sorted(set(budget) - allowed)
+    if unknown:
+        raise params.error(f"{key}: unknown key {unknown[0]}; expected one of {sorted(allowed)}")
+    fixed = {k: v for k, v in vars(train_cfg).items() if k not in budget}
+    return fill(params, key, type(train_cfg), budget, **fixed)  # (types checked as for baselines.<method>)
+
+
+def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: list[Layout],
+                     validation: Callable[[], list[Layout]]) -> list[TrainTask]:
+    """One task per seed of ``generalisation.seeds``: ``method``'s view network on the training ``layouts``
+    (online methods) or on their ``dataset`` (offline ones); ``validation()`` gives the layouts a budget
+    measured by acting stops on (:class:`StepsToExit`)."""
+    from hnsdt.data.frames import load_frames
+
+    g = params.need("generalisation")
+    if method not in g.learned:
+        raise ValueError(f"method {method!r} is not in generalisation.methods {list(g.methods)} or "
+                         f"generalisation.baselines {list(g.baselines)}")
+    online = lookup_method(method).training == "online"
+    if online:
+        data = (list(layouts), g.max_steps)
+        facts = {"family": g.family, "train_layouts": g.train_layouts}
+    else:
+        from hnsdt.data.format import check_dataset
+
+        radius = check_dataset(dataset).get("view_radius", 0)
+        if radius != g.view_radius:
+            raise ValueError(f"dataset {dataset}: view radius {radius} (0 = no observation.view), but "
+                             f"generalisation.view_radius is {g.view_radius}; collect it with "
+                             "`python pipeline/generalisation.py collect`")
+        data = load_frames(dataset, method_executor(params, method).operators)  # (the paper's arm: Move labels)
+        facts = {"dataset": str(dataset), "family": g.family,
+                 "target_return": float(data.returns_to_go[np.unique(data.episode_start)].max())}
+    net_cfg, train_cfg = layout_network_configs(params, method, g.seeds[0], layouts[0])  # (the layouts are generated once)
+    wanted = list(getattr(train_cfg, "behaviours", ()))
+    if not online and wanted and not np.isin(data.policy, wanted).any():
+        raise ValueError(f"{method} learns from {wanted} episodes and {dataset} holds none; set "
+                         "generalisation.random_episodes_per_layout > 0 (random walks) and collect again")
+    measure = None
+    if _budget_on_validation_layouts(params, method):
+        measure = StepsToExit.on_layouts(validation(), g.max_steps,
+                                         params.train.validation[method].starts, method,
+                                         method_executor(params, method), facts)
+    return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data, facts, measure=measure)
+            for seed in g.seeds]

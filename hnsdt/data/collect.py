@@ -158,3 +158,28 @@ def collect_dataset(cfg: CollectConfig, root: str | Path, repo_id: str, progress
     card = card_arguments(cfg, episodes, provenance or {})
     return write_dataset(root, repo_id, cfg.layout, episodes, cfg.fps, meta, card, progress=progress,
                          render_px=cfg.render)
+
+
+def collect_on_layouts(cfg: CollectConfig, layouts: list[Layout], root: str | Path, repo_id: str, view_radius: int,
+                       family: str, progress: bool = True, provenance: dict | None = None) -> Path:
+    """Collect ``cfg``'s behaviours on every layout of ``layouts`` (each its own batch seeds) and write one
+    dataset whose frames also store the local view of ``view_radius`` and their layout's index; its card cites
+    ``provenance``. ``cfg.layout`` is ignored: the layouts' list takes its place."""
+    from dataclasses import replace
+
+    from hnsdt.data.card import card_arguments
+    from hnsdt.data.lerobot_io import write_dataset
+
+    episodes = []
+    for i, layout in enumerate(tqdm(layouts, desc=f"collect {cfg.env_id}", unit="layout", disable=not progress)):
+        for ep in collect_episodes(replace(cfg, layout=layout, seed=_batch_seed(cfg.seed, 1_000_003, i)), False):
+            ep["layout_index"] = i
+            ep["meta"]["layout_index"] = i
+            episodes.append(ep)
+    meta = {"repo_id": repo_id, "env_id": cfg.env_id, "family": family, "layout": layouts[0].name,
+            "layouts": [lay.name for lay in layouts], "max_steps": cfg.max_steps, "fps": cfg.fps, "seed": cfg.seed,
+            "fail_probs": list(cfg.fail_probs), "behaviours": [vars(b) for b in cfg.behaviours],
+            "executor": vars(cfg.executor)}
+    card = card_arguments(replace(cfg, layout=layouts[0]), episodes, provenance or {}, layouts)
+    return write_dataset(root, repo_id, layouts, episodes, cfg.fps, meta, card, progress=progress,
+                         view_radius=view_radius)

@@ -387,3 +387,97 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
         summ.to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
         (tmp / "metrics.json").write_text(json.dumps(metrics_json(summ), indent=2, sort_keys=True) + "\n")
     return table
+
+
+# -- many layouts (the unseen-layout experiment) ----------------------------------------------------------
+# A source is a layout placed in a split with its step limit (:class:`hnsdt.generalisation.Source`: ``split``,
+# ``layout``, ``max_steps``, ``name``); every method × seed runs on every source, one batch per layout.
+
+@lru_cache(maxsize=None)
+def _optimum(layout: Layout, fail_prob: float, max_steps: int) -> tuple[float, float]:
+    from hnsdt.oracle import optimum
+
+    best = optimum(layout, fail_prob, max_steps)
+    return float(best.steps), float(best.success)
+
+
+def episode_seed(seed: int, layout_index: int) -> int:
+    """The environment seed of a layout for one seed: the same for every method."""
+    return int(np.random.SeedSequence([seed, layout_index, 7207]).generate_state(1)[0])
+
+
+def layout_rows(task: EvalTask, batch: Batch, episodes: list[Episode]) -> tuple[list[dict], list[dict]]:
+    """``(episode rows, sub-goal segment rows)`` of a layout's batch (``batch.key``: the layout's source and the
+    episodes per fail_prob); only plan-following methods have segments (:func:`segment_facts`)."""
+    src, per_fail_prob = batch.key
+    navigator = layout_navigator(src.layout) if any(ep.segments for ep in episodes) else None
+    rows, segments = [], []
+    for i, ep in enumerate(episodes):
+        ids = {"method": task.method, "seed": task.seed, "split": src.split, "layout": src.name,
+               "fail_prob": float(batch.fail_prob[i]), "episode": i % per_fail_prob}
+        rows.append(ids | {"success": bool(ep.success), "steps": ep.length, "reward": round(ep.ret, 6)})
+        if ep.segments:
+            segments += [ids | row for row in segment_facts(ep, navigator, ids["fail_prob"])]
+    return rows, segments
+
+
+def layout_batches(seed: int, sources: tuple, fail_probs: tuple[float, ...], episodes: int) -> tuple[Batch, ...]:
+    """One batch per layout: its episodes at every failure probability run together (copies with their own
+    fail_prob), one agent call per step for all."""
+    per_copy = tuple(float(p) for p in np.repeat(np.asarray(fail_probs, dtype=np.float64), episodes))
+    return tuple(Batch(src.layout, src.max_steps, len(per_copy), per_copy, episode_seed(seed, li), (src, episodes))
+                 for li, src in enumerate(sources))
+
+
+def evaluate_layouts(methods: list[str], seeds: list[int], sources: tuple, fail_probs: tuple[float, ...],
+                     episodes: int, executors: dict[str, ExecutorConfig], epsilons: dict[str, float],
+                     models_root: str | Path, out_dir: str | Path, compute=None, progress: bool = True) -> pd.DataFrame:
+    """Every method × seed on every source, ``episodes`` per layout and fail_prob, the checkpoints of view models
+    at ``models_root/<method>/seed<K>``; write ``episodes.csv``, ``summary.csv`` (:func:`layout_summary`),
+    ``segments.csv`` and ``layouts.csv`` under ``out_dir``, with the exact optimum per layout and fail_prob."""
+    from hnsdt.compute import Compute, run_tasks
+    from hnsdt.fileio import atomic_dir
+    from hnsdt.methods import METHODS
+    from hnsdt.models.checkpoint import load_checkpoint
+
+    tasks = []
+    for method in methods:
+        for seed in seeds:
+            model, meta = None, {}
+            if lookup_method(method).training != "none":
+                path = Path(models_root) / method / f"seed{seed}"
+                model, meta = load_checkpoint(path)
+                if meta.get("arch") != resolve(METHODS[method].view_network).arch:
+                    raise ValueError(f"{path} is not a view model (train it with `python pipeline/generalisation.py "
+                                     f"train --method {method}`)")
+            tasks.append(EvalTask(method, seed, executors[method], model, meta, epsilons.get(method, 0.0),
+                                  layout_batches(seed, sources, fail_probs, episodes), layout_rows))
+    results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
+    table = pd.DataFrame([row for batches in results for rows, _ in batches for row in rows])
+    segments = pd.DataFrame([row for batches in results for _, rows in batches for row in rows])
+    optimal = {(s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fail_probs}
+    table["optimal_steps"], table["optimal_success"] = zip(*(optimal[key] for key in zip(table.layout, table.fail_prob)))
+    with atomic_dir(Path(out_dir)) as tmp:
+        tmp.mkdir()
+        table.to_csv(tmp / "episodes.csv", index=False, float_format="%.6g")
+        layout_summary(table).to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
+        segments.to_csv(tmp / "segments.csv", index=False, float_format="%.6g")
+        layouts = pd.DataFrame([{"split": s.split, "layout": s.name, "rows": s.layout.shape[0],
+                                 "cols": s.layout.shape[1], "max_steps": s.max_steps} for s in sources])
+        layouts.to_csv(tmp / "layouts.csv", index=False)
+    return table
+
+
+def layout_summary(table: pd.DataFrame) -> pd.DataFrame:
+    """Per method × split × fail_prob: success and steps / optimum (successful episodes), mean and std over
+    seeds; each seed's values are means over its layouts' episodes; the exact optimum's success beside them."""
+    t = table.assign(ratio=np.where(table["success"], table["steps"] / table["optimal_steps"], np.nan))
+    per_seed = t.groupby(["method", "split", "fail_prob", "seed"], sort=False).agg(
+        success=("success", "mean"), steps_ratio=("ratio", "mean"), optimal=("optimal_success", "mean")).reset_index()
+    out = per_seed.groupby(["method", "split", "fail_prob"], sort=False).agg(
+        success_mean=("success", "mean"), success_std=("success", "std"),
+        steps_ratio_mean=("steps_ratio", "mean"), steps_ratio_std=("steps_ratio", "std"),
+        optimal_success=("optimal", "mean"), seeds=("seed", "nunique")).reset_index()
+    layouts = table.groupby("split")["layout"].nunique()
+    out["layouts"] = out["split"].map(layouts)
+    return out
