@@ -5,7 +5,7 @@ Each configuration runs in a fresh process: a decision transformer (L3, d128, co
 30 steps on a fixed random batch stream, and option-critic trained 6,000 env steps on Case 1. It prints the
 hash of each model's weights and the time per step. A row whose hash differs from the first row's shows a
 setting that a different machine (another ISA, another vendor's MKL path, another core count) would change;
-the last row is what ``hnsdt/reproducible.py`` pins.
+the last row is what ``hnsdt/core/reproducible.py`` pins.
 """
 
 from __future__ import annotations
@@ -15,14 +15,14 @@ import os
 import subprocess
 import sys
 
-from hnsdt.reproducible import PINNED_CPU
+from hnsdt.core.reproducible import PINNED_CPU
 
 CHILD = r"""
 import hashlib, time
 import numpy as np, torch
 import hnsdt
 from hnsdt.envs import load_layout
-from hnsdt.agents.baselines.options import OptionsConfig, train_options
+from hnsdt.baselines.options import OptionsConfig, train_options
 from hnsdt.models.dt import DecisionTransformer, DTConfig
 from hnsdt.models.qnetwork import OptionCriticConfig
 
@@ -66,7 +66,7 @@ CONFIGS = [
     ("MKL_CBWR=AUTO (MKL's reproducible mode, ISA still chosen per CPU)", {"MKL_CBWR": "AUTO"}),
     ("MKL_CBWR=COMPATIBLE", {"MKL_CBWR": "COMPATIBLE"}),
     ("OMP_NUM_THREADS=1", {"OMP_NUM_THREADS": "1"}),
-    ("pinned (hnsdt/reproducible.py)", PINNED_CPU),
+    ("pinned (hnsdt/core/reproducible.py)", PINNED_CPU),
     ("pinned, second process", PINNED_CPU),
 ]
 

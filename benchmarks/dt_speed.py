@@ -30,7 +30,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from hnsdt.reproducible import pin_process
+from hnsdt.core.reproducible import pin_process
 
 pin_process()  # the pipeline's kernels and threads: the figures are what a stage sees
 

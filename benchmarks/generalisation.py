@@ -31,15 +31,15 @@ from pathlib import Path
 import pandas as pd
 import yaml
 
-from hnsdt.reproducible import pin_process
+from hnsdt.core.reproducible import pin_process
 
 pin_process()
 
 from hnsdt import generalisation as gen  # noqa: E402
-from hnsdt.config import compute_settings, load_params  # noqa: E402
-from hnsdt.params import validate  # noqa: E402
+from hnsdt.core.config import compute_settings, load_params  # noqa: E402
+from hnsdt.core.params import validate  # noqa: E402
 from hnsdt.evaluation import ablations  # noqa: E402
-from hnsdt.methods import DT_METHODS  # noqa: E402
+from hnsdt.core.methods import DT_METHODS  # noqa: E402
 from hnsdt.evaluation.report import SPLIT_LABELS, drawn_lines, generalisation_table  # noqa: E402
 from hnsdt.models.checkpoint import load_checkpoint  # noqa: E402
 from hnsdt.training import train_all  # noqa: E402
@@ -184,7 +184,7 @@ def cpu_name() -> str:
 
 def variant_rows(args, params, table: pd.DataFrame, best: dict, rounds: dict, dataset_digest: str, seconds: float) -> pd.DataFrame:
     """The benchmark's table as rows of hnsdt.evaluation.ablations' file."""
-    from hnsdt.provenance import git_revision, params_digest
+    from hnsdt.core.provenance import git_revision, params_digest
 
     g = params.generalisation
     side = 2 * g.view_radius + 1
@@ -204,7 +204,7 @@ def relabelled_run(params, run, models: Path, episodes: int):
     added to its data (and to the behaviours it learns from)."""
     from dataclasses import replace
 
-    from hnsdt.config import method_executor
+    from hnsdt.core.config import method_executor
     from hnsdt.data.relabel import RELABELLED, join_frames, learner_frames
 
     g = gen.settings(params)

@@ -24,7 +24,7 @@ import argparse
 import copy
 import time
 
-from hnsdt.reproducible import pin_process
+from hnsdt.core.reproducible import pin_process
 
 pin_process()
 
@@ -36,9 +36,9 @@ def run(task):
     from dataclasses import replace
     from pathlib import Path
 
-    from hnsdt.config import env_spec, load_params, method_executor
+    from hnsdt.core.config import env_spec, load_params, method_executor
     from hnsdt.evaluation.evaluate import Cell, layout_navigator, build_agent, run_cell, segment_rows
-    from hnsdt.methods import DT_METHODS
+    from hnsdt.core.methods import DT_METHODS
     from hnsdt.models.train import train_dt
     from hnsdt.training import plan_runs
 
@@ -56,7 +56,7 @@ def run(task):
                                 on_epoch=lambda e, step, m: snaps.__setitem__(e, (step, copy.deepcopy(m)))
                                 if e in keep else None)
     else:
-        from hnsdt.agents.baselines.recurrent import train_recurrent
+        from hnsdt.baselines.recurrent import train_recurrent
 
         for e in sorted(keep):
             model, _, usage = train_recurrent(frames, model_cfg, replace(cfg, epochs=e, max_steps=0), progress=False)
@@ -85,7 +85,7 @@ def run(task):
 def main() -> None:
     import pandas as pd
 
-    from hnsdt.compute import Compute, run_tasks
+    from hnsdt.core.compute import Compute, run_tasks
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--env", default="multikeydoor")

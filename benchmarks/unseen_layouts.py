@@ -19,7 +19,7 @@ from hnsdt.agents.rollout import rollout
 from hnsdt.envs.generate import check_usable, generate
 from hnsdt.envs.minigrid_adapter import from_minigrid
 from hnsdt.envs.vector import KeyDoorVectorEnv
-from hnsdt.oracle import optimum
+from hnsdt.envs.oracle import optimum
 
 SOURCES = {  # name -> (layout of seed s, max_steps)
     "generated keydoor": (lambda s: generate("keydoor", s), 100),

@@ -12,12 +12,12 @@ import json
 import sys
 from pathlib import Path
 
-from hnsdt.methods import LEARNED
+from hnsdt.core.methods import LEARNED
 
 
 def _resolve_env(args) -> tuple[str, object, int]:
     """--env is a params env name (keydoor), or a registered id; --layout overrides the layout."""
-    from hnsdt.config import env_spec, load_params
+    from hnsdt.core.config import env_spec, load_params
     from hnsdt.envs import ENV_IDS, load_layout
 
     if args.env in ENV_IDS:
@@ -75,8 +75,8 @@ def cmd_pddl(args) -> None:
 
 
 def cmd_collect(args) -> None:
-    from hnsdt import stages
-    from hnsdt.config import load_params
+    from hnsdt.core import stages
+    from hnsdt.core.config import load_params
 
     stages.collect(load_params(args.params), args.env, Path(args.out or f"data/datasets/{args.env}"), args.repo_id,
                    progress=not args.quiet)
@@ -106,8 +106,8 @@ def cmd_dataset_push(args) -> None:
 def cmd_train(args) -> None:
     """Train one method on one env for every seed (train.seeds, or --seed): one task per seed on the
     executor of ``compute`` (or --executor/--workers)."""
-    from hnsdt import stages
-    from hnsdt.config import compute_settings, load_params
+    from hnsdt.core import stages
+    from hnsdt.core.config import compute_settings, load_params
 
     params = load_params(args.params)
     stages.train(params, args.env, args.method, Path(args.dataset or f"data/datasets/{args.env}"),
@@ -117,8 +117,8 @@ def cmd_train(args) -> None:
 
 
 def cmd_evaluate(args) -> None:
-    from hnsdt import stages
-    from hnsdt.config import compute_settings, load_params
+    from hnsdt.core import stages
+    from hnsdt.core.config import compute_settings, load_params
 
     params = load_params(args.params)
     stages.evaluate(params, Path(args.models), Path(args.datasets), Path(args.out),
@@ -127,8 +127,8 @@ def cmd_evaluate(args) -> None:
 
 
 def cmd_report(args) -> None:
-    from hnsdt import stages
-    from hnsdt.config import load_params
+    from hnsdt.core import stages
+    from hnsdt.core.config import load_params
 
     stages.report(load_params(args.params), Path(args.results), Path(args.out),
                   generalisation=Path(args.generalisation) if args.generalisation else None,
@@ -200,8 +200,8 @@ def _open_in_rerun(rrds: list[Path]) -> None:
 
 def cmd_generalisation(args) -> None:
     """The unseen-layout experiment's stages (hnsdt.generalisation): collect, train one method, evaluate."""
-    from hnsdt import stages
-    from hnsdt.config import compute_settings, load_params
+    from hnsdt.core import stages
+    from hnsdt.core.config import compute_settings, load_params
 
     drawn = []
     if args.drawn:  # a folder of the user's maps in place of generalisation.drawn's
@@ -224,7 +224,7 @@ def cmd_generalisation(args) -> None:
 
 
 def _compute_arguments(p: argparse.ArgumentParser) -> None:
-    from hnsdt.compute import EXECUTORS
+    from hnsdt.core.compute import EXECUTORS
 
     p.add_argument("--executor", choices=EXECUTORS, help="where the runs execute (default: compute.executor); "
                    "ray connects to RAY_ADDRESS or starts a local instance. The outputs do not depend on it")
@@ -273,7 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
                        "`train_offline` and `train_online` stages)")
     p.add_argument("--env", required=True, help="env name from train.envs")
     p.add_argument("--method", required=True, choices=LEARNED, help="a learned method of the registry "
-                   "(hnsdt.methods)")
+                   "(hnsdt.core.methods)")
     p.add_argument("--seed", type=int, nargs="+", help="training seeds (default: train.seeds of params.yaml)")
     p.add_argument("--dataset", help="offline methods: LeRobot dataset folder (default: data/datasets/ENV)")
     p.add_argument("--out", help="checkpoints folder, one seedK/ per seed (default: models/ENV/METHOD)")
@@ -351,14 +351,14 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     if argv is None:
-        from hnsdt.reproducible import pin_process
+        from hnsdt.core.reproducible import pin_process
 
         pin_process()
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command == "replay" and not args.episode_id and args.dataset is None:
         parser.error("replay needs an EPISODE_ID or --dataset")
-    from hnsdt.stages import guarded
+    from hnsdt.core.stages import guarded
 
     return guarded(args.func, args)
 

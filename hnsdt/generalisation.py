@@ -1,6 +1,6 @@
 """The unseen-layout experiment (``generalisation`` in params.yaml; docs/unseen-layouts.md): do the learned
 methods transfer to maps they were not trained on? This module holds what is its own, the layout splits; its
-stages run through the same code as the paper protocol's (:mod:`hnsdt.stages`).
+stages run through the same code as the paper protocol's (:mod:`hnsdt.core.stages`).
 
 **Splits** (:func:`layout_splits`): ``train`` = the family's generated layouts of seeds ``0..N-1``, ``heldout`` =
 seeds from :data:`HELDOUT_SEED` on, ``minigrid`` = grids the ``minigrid`` package's own DoorKey generator makes,
@@ -23,9 +23,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from hnsdt.config import Params, eval_epsilon, layout_collect_config, method_executor
+from hnsdt.core.config import Params, eval_epsilon, layout_collect_config, method_executor
 from hnsdt.envs.layout import Layout
-from hnsdt.methods import REFERENCE
+from hnsdt.core.methods import REFERENCE
 
 HELDOUT_SEED = 100_000  # held-out layouts are the family's seeds from here on
 VALIDATION_SEED = 200_000  # and validation layouts from here on

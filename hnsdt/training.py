@@ -3,7 +3,7 @@
 
 :func:`plan_runs` reads the params and the data once and returns one self-contained :class:`TrainTask` per
 seed; :func:`train_run` is the task: it trains and returns the model and its facts, touching no file, so any
-executor (:mod:`hnsdt.compute`) can run it; :func:`train_all` runs the tasks and writes the checkpoints and
+executor (:mod:`hnsdt.core.compute`) can run it; :func:`train_all` runs the tasks and writes the checkpoints and
 curves.
 """
 
@@ -15,11 +15,11 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hnsdt.config import (EnvSpec, Params, baseline_settings, env_spec, fill, method_executor, model_config,
+from hnsdt.core.config import (EnvSpec, Params, baseline_settings, env_spec, fill, method_executor, model_config,
                           train_settings)
 from hnsdt.envs.layout import Layout
-from hnsdt.methods import METHODS, network_for, resolve
-from hnsdt.methods import method as lookup_method
+from hnsdt.core.methods import METHODS, network_for, resolve
+from hnsdt.core.methods import method as lookup_method
 
 
 @dataclass(frozen=True)
@@ -184,11 +184,11 @@ def _check_operator_coverage(frames, params: Params, env: EnvSpec, method: str, 
 
 def train_run(task: TrainTask):
     """Train one seed: ``(model, checkpoint facts, curve)``. With ``task.split``, it stops half-way (half its
-    epochs, or half its env steps) and returns :class:`~hnsdt.compute.Continue` with its state (a
-    :class:`~hnsdt.models.fit.FitState` or a paused :class:`~hnsdt.agents.baselines.online.OnlineRun`): the
+    epochs, or half its env steps) and returns :class:`~hnsdt.core.compute.Continue` with its state (a
+    :class:`~hnsdt.models.fit.FitState` or a paused :class:`~hnsdt.baselines.online.OnlineRun`): the
     executor queues the second half behind the other seeds' first halves, so 5 seeds on 2 workers take 2.5
     seed-times, and the weights are the same bytes as in one go (tested)."""
-    from hnsdt.compute import Continue
+    from hnsdt.core.compute import Continue
 
     method, seed, model_cfg, train_cfg = task.method, task.seed, task.model_cfg, task.train_cfg
     online = METHODS[method].training == "online"
@@ -211,8 +211,8 @@ def train_all(runs: list[TrainTask], env: str, out: Path, curves: Path, compute,
     each folder complete or absent."""
     import pandas as pd
 
-    from hnsdt.compute import run_tasks
-    from hnsdt.fileio import atomic_dir
+    from hnsdt.core.compute import run_tasks
+    from hnsdt.core.fileio import atomic_dir
     from hnsdt.models.checkpoint import save_checkpoint
 
     inline = compute.executor == "local" and compute.local_workers(len(runs)) == 1

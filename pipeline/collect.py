@@ -1,4 +1,4 @@
-"""DVC stage `collect@ENV`: exploration data for one environment as a LeRobot dataset (hnsdt.stages.collect).
+"""DVC stage `collect@ENV`: exploration data for one environment as a LeRobot dataset (hnsdt.core.stages.collect).
 
 Usage: python pipeline/collect.py --env ENV --out data/datasets/ENV
 """
@@ -7,11 +7,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from hnsdt.reproducible import pin_process
+from hnsdt.core.reproducible import pin_process
 
 pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 
-from hnsdt import stages  # noqa: E402
+from hnsdt.core import stages  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

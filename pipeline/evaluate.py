@@ -1,5 +1,5 @@
 """DVC stage `evaluate`: every method x env x fail_prob x seed; metrics, per-episode table, recordings
-(hnsdt.stages.evaluate).
+(hnsdt.core.stages.evaluate).
 
 Usage: python pipeline/evaluate.py --models models --datasets data/datasets --out results --recordings recordings
        --metrics metrics
@@ -12,11 +12,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from hnsdt.reproducible import pin_process
+from hnsdt.core.reproducible import pin_process
 
 pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 
-from hnsdt import stages  # noqa: E402
+from hnsdt.core import stages  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

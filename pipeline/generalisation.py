@@ -1,5 +1,5 @@
 """DVC stages `collect_generalisation`, `train_generalisation` and `evaluate_generalisation`: the unseen-layout
-experiment (hnsdt.generalisation, through hnsdt.stages).
+experiment (hnsdt.generalisation, through hnsdt.core.stages).
 
 Usage: python pipeline/generalisation.py collect --out generalisation/dataset
        python pipeline/generalisation.py train --method METHOD --dataset generalisation/dataset
@@ -11,11 +11,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from hnsdt.reproducible import pin_process
+from hnsdt.core.reproducible import pin_process
 
 pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 
-from hnsdt import stages  # noqa: E402
+from hnsdt.core import stages  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -1,5 +1,5 @@
 """DVC stage `report`: figures and report.md traced to the git revision, params and input md5s, and the headline
-metrics (hnsdt.stages.report).
+metrics (hnsdt.core.stages.report).
 
 Usage: python pipeline/report.py --results results --generalisation generalisation/results --out report
        --headline metrics/headline.json --ablations benchmarks/results/generalisation.csv
@@ -9,11 +9,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from hnsdt.reproducible import pin_process
+from hnsdt.core.reproducible import pin_process
 
 pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 
-from hnsdt import stages  # noqa: E402
+from hnsdt.core import stages  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -1,5 +1,5 @@
 """DVC stages `train`, `train_offline` and `train_online`: one learned method on one env, every seed of
-train.seeds in this one process (hnsdt.stages.train).
+train.seeds in this one process (hnsdt.core.stages.train).
 
 Usage: python pipeline/train.py --env ENV --method METHOD [--dataset data/datasets/ENV] --out models/ENV/METHOD
        --curves plots/train/ENV-METHOD
@@ -10,11 +10,11 @@ import argparse
 import sys
 from pathlib import Path
 
-from hnsdt.reproducible import pin_process
+from hnsdt.core.reproducible import pin_process
 
 pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
 
-from hnsdt import stages  # noqa: E402
+from hnsdt.core import stages  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -6,9 +6,9 @@ os.environ["HF_HOME"] = tempfile.mkdtemp(prefix="hnsdt-hf-home-")
 os.environ["HF_HUB_OFFLINE"] = "1"
 os.environ.setdefault("MPLBACKEND", "Agg")
 
-# The CPU kernels and thread count the pipeline pins (hnsdt/reproducible.py), so learned models and the tests'
+# The CPU kernels and thread count the pipeline pins (hnsdt/core/reproducible.py), so learned models and the tests'
 # thresholds come out the same on any machine; subprocesses inherit them.
-from hnsdt.reproducible import pin_environment  # noqa: E402
+from hnsdt.core.reproducible import pin_environment  # noqa: E402
 
 pin_environment()
 # One torch thread per test process, as the pipeline's runs use (compute.threads: 1): pytest-xdist runs one

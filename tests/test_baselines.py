@@ -8,12 +8,12 @@ import pytest
 import torch
 
 from hnsdt.agents import SymbolicAgent, rollout
-from hnsdt.agents.baselines.dqn import DQNAgent, DQNConfig, train_dqn
-from hnsdt.agents.baselines.options import OptionsAgent, train_options
-from hnsdt.agents.baselines.recurrent import RecurrentAgent, RecurrentTrainConfig, episode_batch, train_recurrent
+from hnsdt.baselines.dqn import DQNAgent, DQNConfig, train_dqn
+from hnsdt.baselines.options import OptionsAgent, train_options
+from hnsdt.baselines.recurrent import RecurrentAgent, RecurrentTrainConfig, episode_batch, train_recurrent
 from hnsdt.agents.rollout import RandomAgent
-from hnsdt.config import ParamsError, baseline_settings, evaluate_settings, load_params
-from hnsdt.params import validate
+from hnsdt.core.config import ParamsError, baseline_settings, evaluate_settings, load_params
+from hnsdt.core.params import validate
 from hnsdt.models.windows import frames_from_arrays
 from hnsdt.envs import KeyDoorVectorEnv, load_layout
 from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint

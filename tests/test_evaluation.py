@@ -60,7 +60,7 @@ def test_seed_view_counts_solving_seeds_and_bootstraps_over_seeds():
 def test_the_report_revision_is_dirty_for_code_changes_not_for_the_lock_file(tmp_path):
     import subprocess
 
-    from hnsdt.provenance import git_revision
+    from hnsdt.core.provenance import git_revision
 
     def git(*args):
         subprocess.run(["git", "-c", "user.name=t", "-c", "user.email=t@t", *args], cwd=tmp_path, check=True,

@@ -8,10 +8,10 @@ import pytest
 import torch
 
 from hnsdt.agents import SymbolicAgent, rollout
-from hnsdt.agents.baselines.recurrent import RecurrentTrainConfig, train_recurrent
+from hnsdt.baselines.recurrent import RecurrentTrainConfig, train_recurrent
 from hnsdt.models.windows import frames_from_arrays
 from hnsdt.envs import KeyDoorVectorEnv
-from hnsdt.compute import Compute, Continue, run_tasks
+from hnsdt.core.compute import Compute, Continue, run_tasks
 from hnsdt.models.dt import DTConfig
 from hnsdt.models.fit import FitState
 from hnsdt.models.recurrent import RecurrentConfig
@@ -61,7 +61,7 @@ def test_a_run_stopped_and_continued_elsewhere_is_the_run_in_one_go(frames, keyd
 
 
 def _dqn(keydoor, **kw):
-    from hnsdt.agents.baselines.dqn import DQNConfig, train_dqn
+    from hnsdt.baselines.dqn import DQNConfig, train_dqn
     from hnsdt.models.qnetwork import QNetworkConfig
 
     return train_dqn(keydoor, 100, QNetworkConfig(keydoor.n_flags, *keydoor.shape, hidden=32),
@@ -69,7 +69,7 @@ def _dqn(keydoor, **kw):
 
 
 def _options(keydoor, **kw):
-    from hnsdt.agents.baselines.options import OptionsConfig, train_options
+    from hnsdt.baselines.options import OptionsConfig, train_options
     from hnsdt.models.qnetwork import OptionCriticConfig
 
     return train_options(keydoor, 100, OptionCriticConfig(keydoor.n_flags, *keydoor.shape, hidden=32),

@@ -10,7 +10,7 @@ import yaml
 
 from hnsdt.envs import KeyDoorVectorEnv, LayoutError, load_layout
 from hnsdt.envs.generate import FAMILIES, FamilySizes, check_usable, generate, write_layout
-from hnsdt.params import validate
+from hnsdt.core.params import validate
 from hnsdt.envs.observation import (DOOR_CLOSED, DOOR_OPEN, EXIT, FLOOR, ITEM, KEY, OUTSIDE, WALL, full_view,
                                     local_view)
 
@@ -236,7 +236,7 @@ def test_the_lstm_and_gru_read_the_decision_transformers_view_encoder(tmp_path):
     import torch
 
     from hnsdt import generalisation as gen
-    from hnsdt.methods import METHODS, resolve
+    from hnsdt.core.methods import METHODS, resolve
 
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"].update(conv_layers=2)
@@ -421,7 +421,7 @@ def _tiny_generalisation_params(tmp_path) -> dict:
 
 def _view_network(name: str, radius: int):
     """The registry's view network of ``name`` at a tiny size."""
-    from hnsdt.methods import METHODS, resolve
+    from hnsdt.core.methods import METHODS, resolve
     from hnsdt.models.view import view_config
 
     entry = METHODS[name]
@@ -439,7 +439,7 @@ def test_every_learned_method_has_a_view_network_that_never_reads_the_absolute_c
     the same outputs; another view gives other outputs."""
     import torch
 
-    from hnsdt.methods import METHODS
+    from hnsdt.core.methods import METHODS
 
     torch.manual_seed(0)
     model = _view_network(name, 1).eval()
@@ -527,7 +527,7 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     import pandas as pd
 
     from hnsdt import generalisation as gen
-    from hnsdt.compute import Compute
+    from hnsdt.core.compute import Compute
     from hnsdt.models.checkpoint import save_checkpoint
     from hnsdt.training import train_run
 
@@ -578,7 +578,7 @@ def test_a_bad_generalisation_knob_is_one_line_naming_it(tmp_path):
 
 def test_a_methods_budget_replaces_the_protocols_knobs_and_a_bad_one_is_named(tmp_path):
     from hnsdt import generalisation as gen
-    from hnsdt.config import ParamsError
+    from hnsdt.core.config import ParamsError
 
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"]["budgets"] = {"gru": {"epochs": 3, "lr": 1}, "dqn": {"env_steps": 123}}
@@ -608,7 +608,7 @@ def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operator
     paper's Move labels and is evaluated under the paper's planner (BFS over Move operators); without random
     walks its training stops with one line naming the knob."""
     from hnsdt import generalisation as gen
-    from hnsdt.compute import Compute
+    from hnsdt.core.compute import Compute
     from hnsdt.models.checkpoint import save_checkpoint
     from hnsdt.symbolic.subgoals import NAME_TO_ID
     from hnsdt.training import train_run
@@ -638,7 +638,7 @@ def test_no_two_splits_share_a_map_and_validation_is_never_evaluated():
     """The default experiment's training, validation, held-out, MiniGrid and hand-drawn maps are pairwise
     distinct grids; a generated grid already in an earlier split is skipped, not reused."""
     from hnsdt import generalisation as gen
-    from hnsdt.config import load_params
+    from hnsdt.core.config import load_params
     from hnsdt.envs.generate import generate
 
     params = load_params(REPO / "params.yaml", [f"generalisation.drawn.folder={REPO / 'layouts/drawn'}"])
@@ -659,9 +659,9 @@ def test_a_validation_split_of_several_families():
     """``generalisation.validation_families``: ``validation_layouts`` maps of each listed family (its own
     validation seeds), none a training or held-out grid; a family whose flags differ is one clear error."""
     from hnsdt import generalisation as gen
-    from hnsdt.config import load_params
+    from hnsdt.core.config import load_params
     from hnsdt.envs.generate import generate
-    from hnsdt.params import ParamsError
+    from hnsdt.core.params import ParamsError
 
     families = ["keydoor", "keydoor_maze", "keydoor_obstacles"]
     params = load_params(REPO / "params.yaml", [f"generalisation.validation_families={families}",

@@ -11,7 +11,7 @@ from conftest import REPO
 PACKAGE = Path(REPO) / "hnsdt"
 LOWER = ("hnsdt.envs", "hnsdt.symbolic", "hnsdt.models", "hnsdt.agents")
 UPPER = ("hnsdt.data", "hnsdt.evaluation", "hnsdt.logs", "hnsdt.generalisation", "hnsdt.training",
-         "hnsdt.config", "hnsdt.cli")
+         "hnsdt.core.config", "hnsdt.cli")
 
 
 def module_name(path: Path) -> str:

@@ -3,7 +3,7 @@ import pytest
 
 from hnsdt.agents import SymbolicAgent, rollout
 from hnsdt.envs import KeyDoorVectorEnv, load_layout
-from hnsdt.oracle import MDP, optimum
+from hnsdt.envs.oracle import MDP, optimum
 from hnsdt.symbolic import SymbolicState, plan, plan_cost
 
 

@@ -160,7 +160,7 @@ def test_the_achieving_step_loss_counts_only_the_actions_that_achieved_their_sub
 def test_the_steps_measure_acts_from_held_out_states_and_keys_the_record(keydoor):
     """``measure: steps``: distinct held-out states the planner can solve, the method's own agent on them at
     fail_prob 0, the same value on every call; training records it as ``validation_steps``."""
-    from hnsdt.config import EnvSpec
+    from hnsdt.core.config import EnvSpec
     from hnsdt.models.train import train_decision_transformer, validation_episodes
     from hnsdt.training import StepsToExit
 

@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from hnsdt.methods import LEARNED, METHODS
+from hnsdt.core.methods import LEARNED, METHODS
 from conftest import hnsdt_cli
 from tiny_repo import ENV, GIT_TRACKED_OUTS, REPO, ran_stages, run
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from hnsdt.fileio import TMP_PREFIX
+from hnsdt.core.fileio import TMP_PREFIX
 from tiny_repo import ENV, GIT_TRACKED_OUTS, lock_outs, ran_stages, run
 
 pytestmark = pytest.mark.slow

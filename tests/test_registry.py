@@ -1,4 +1,4 @@
-"""The method registry (hnsdt.methods) is the one place that names a method."""
+"""The method registry (hnsdt.core.methods) is the one place that names a method."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from hnsdt.agents.rollout import Agent
-from hnsdt.methods import METHODS, STAGES, architectures, resolve
+from hnsdt.core.methods import METHODS, STAGES, architectures, resolve
 
 PACKAGE = Path(__file__).resolve().parent.parent / "hnsdt"
 
@@ -34,7 +34,7 @@ def test_no_module_but_the_registry_spells_a_method_name():
              for path in sorted(PACKAGE.rglob("*.py")) if path.name != "methods.py"
              for line, value in _string_constants(path)
              if value in names and (str(path.relative_to(PACKAGE)), value) not in OTHER_MEANINGS]
-    assert not found, "method names outside hnsdt/methods.py:\n" + "\n".join(found)
+    assert not found, "method names outside hnsdt/core/methods.py:\n" + "\n".join(found)
 
 
 @pytest.mark.parametrize("name", sorted(METHODS))
@@ -56,9 +56,9 @@ def test_every_entry_resolves_to_its_code(name):
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
     """Params at a tiny budget and a small Case 1 dataset (random walks cover every operator, Move included)."""
-    from hnsdt.config import collect_config, load_params
+    from hnsdt.core.config import collect_config, load_params
     from hnsdt.data.collect import collect_dataset
-    from hnsdt.params import validate
+    from hnsdt.core.params import validate
 
     params = copy.deepcopy(load_params(PACKAGE.parent / "params.yaml").raw)
     params["collect"]["fail_probs"] = [0.1]
@@ -81,7 +81,7 @@ def test_every_method_trains_and_acts_through_its_registry_entry(tiny, name):
     architecture and agent, then a batch of evaluation episodes. (Whether it learns is tested elsewhere.)"""
     import json
 
-    from hnsdt.config import env_spec, method_executor
+    from hnsdt.core.config import env_spec, method_executor
     from hnsdt.evaluation.evaluate import Cell, build_agent, run_cell
     from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint
     from hnsdt.training import plan_runs, train_run
@@ -107,7 +107,7 @@ def test_the_train_stage_declares_every_training_knob_it_reads():
     would not rerun training when changed (train.formulation and train.validation once were missing)."""
     import yaml
 
-    from hnsdt.params import TrainParams
+    from hnsdt.core.params import TrainParams
 
     stage = yaml.safe_load((Path(__file__).parents[1] / "dvc.yaml").read_text())["stages"]["train"]
     declared = set(stage["params"])

@@ -20,7 +20,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from hnsdt.methods import METHODS  # noqa: E402
+from hnsdt.core.methods import METHODS  # noqa: E402
 
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
 HEADLINE = "<!-- headline:begin -->", "<!-- headline:end -->"

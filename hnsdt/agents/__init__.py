@@ -1,4 +1,4 @@
-"""Stage 5 of Figure 1 and the baselines: agents that act in batches of environments."""
+"""Stage 5 of Figure 1: agents that act in batches of environments (the baselines' own: :mod:`hnsdt.baselines`)."""
 
 from hnsdt.agents.executor import ExecutorConfig, PlanExecutor
 from hnsdt.agents.hierarchical import HierarchicalAgent

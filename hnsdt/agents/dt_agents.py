@@ -194,7 +194,7 @@ class PureDTAgent:
 
 def make_agent(model: DecisionTransformer, meta: dict, layout: Layout, executor: ExecutorConfig,
                epsilon: float = 0.0, seed: int = 0):
-    """The registry's agent factory (:mod:`hnsdt.methods`), by what conditions the model: a sub-goal token
+    """The registry's agent factory (:mod:`hnsdt.core.methods`), by what conditions the model: a sub-goal token
     (HNSDT, under the plan executor), the return-to-go (target: the dataset's best return) or nothing."""
     condition = model.cfg.condition
     if condition == "subgoal":

@@ -36,5 +36,5 @@ class SymbolicAgent(HierarchicalAgent):
 
 def make_agent(model, meta: dict, layout: Layout, executor: ExecutorConfig, epsilon: float = 0.0,
                seed: int = 0) -> SymbolicAgent:
-    """The registry's agent factory (:mod:`hnsdt.methods`): no model, the plan and the controllers."""
+    """The registry's agent factory (:mod:`hnsdt.core.methods`): no model, the plan and the controllers."""
     return SymbolicAgent(layout, executor)

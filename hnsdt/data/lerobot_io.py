@@ -41,7 +41,7 @@ from hnsdt.data.format import (EPISODES_TABLE, FORMAT_VERSION, HNSDT_META, Datas
 from hnsdt.envs.layout import Layout  # noqa: E402
 from hnsdt.envs.observation import local_view  # noqa: E402
 from hnsdt.envs.render import render_rgb  # noqa: E402
-from hnsdt.fileio import atomic_dir  # noqa: E402
+from hnsdt.core.fileio import atomic_dir  # noqa: E402
 
 def dataset_features(layout: Layout, render_px: int = 0, view_radius: int = 0) -> dict:
     """The per-frame features of a dataset on ``layout`` (:mod:`hnsdt.data.features`); ``render_px`` > 0 adds

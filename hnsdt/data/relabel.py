@@ -20,7 +20,7 @@ from hnsdt.data.collect import random_start_states
 from hnsdt.envs.dynamics import Rules
 from hnsdt.envs.observation import view_states
 from hnsdt.envs.vector import KeyDoorVectorEnv
-from hnsdt.methods import METHODS, resolve
+from hnsdt.core.methods import METHODS, resolve
 from hnsdt.models.windows import Frames, frames_from_arrays
 
 RELABELLED = "relabelled"  # the behaviour name of the learner's relabelled episodes (``Frames.policy``)

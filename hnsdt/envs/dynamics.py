@@ -1,7 +1,7 @@
 """The rules of every key–door world, written once.
 
 :class:`KeyDoorEnv` (one copy, gymnasium's ``Env``), :class:`KeyDoorVectorEnv` (N copies at once) and, through
-the vector env, the exact optimum (:mod:`hnsdt.oracle`) all step through :meth:`Rules.step`, so a change to the
+the vector env, the exact optimum (:mod:`hnsdt.envs.oracle`) all step through :meth:`Rules.step`, so a change to the
 rules cannot make them disagree.
 
 One step of a copy, given one uniform draw ``u`` (drawn every step, move or not):

@@ -185,7 +185,7 @@ def check_usable(layout: Layout, max_steps: int, fail_prob: float, min_success: 
     """Raise :class:`LayoutError` unless the planner finds a plan from the start and the exact optimum
     succeeds within ``max_steps`` with probability at least ``min_success`` at ``fail_prob``."""
     from hnsdt.envs.dynamics import Rules
-    from hnsdt.oracle import optimum
+    from hnsdt.envs.oracle import optimum
     from hnsdt.symbolic import SymbolicState, plan
 
     start = SymbolicState.from_observation(layout, Rules(layout).initial_states(1)[0])
@@ -199,7 +199,7 @@ def check_usable(layout: Layout, max_steps: int, fail_prob: float, min_success: 
 
 def write_layout(layout: Layout, path: str | Path) -> Path:
     """Write ``layout`` as a layout file (loadable by ``envs.<name>.layout`` and :func:`load_layout`)."""
-    from hnsdt.fileio import atomic_file
+    from hnsdt.core.fileio import atomic_file
 
     path = Path(path)
     with atomic_file(path) as tmp:

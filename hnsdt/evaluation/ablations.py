@@ -20,8 +20,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
-from hnsdt.fileio import atomic_file  # noqa: E402
-from hnsdt.methods import LEARNED, METHODS, PROPOSED  # noqa: E402
+from hnsdt.core.fileio import atomic_file  # noqa: E402
+from hnsdt.core.methods import LEARNED, METHODS, PROPOSED  # noqa: E402
 
 INGREDIENTS = ("reference", "encoder", "maps", "augmentation", "relabelling", "family")  # reference: the default's knobs
 COLUMNS = [  # one row per variant x method x split

@@ -2,7 +2,7 @@
 
 One :class:`EvalTask` per method × env × seed (:func:`evaluate_run`, shared with the unseen-layout experiment)
 runs its fail_probs' cells as batches and returns table rows, touching no file, so any executor
-(:mod:`hnsdt.compute`) can run it; :func:`evaluate_all` loads the
+(:mod:`hnsdt.core.compute`) can run it; :func:`evaluate_all` loads the
 checkpoints, runs the tasks and writes the tables and recordings.
 
 Metrics follow the paper: success rate, mean steps of the successful episodes, mean reward (episode return);
@@ -25,8 +25,8 @@ from hnsdt.agents.rollout import Agent, Episode, rollout
 from hnsdt.envs.keydoor import PICK
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv
-from hnsdt.methods import ARMS, resolve
-from hnsdt.methods import method as lookup_method
+from hnsdt.core.methods import ARMS, resolve
+from hnsdt.core.methods import method as lookup_method
 
 
 @dataclass
@@ -219,10 +219,10 @@ def summary(table: pd.DataFrame) -> pd.DataFrame:
 
 
 def add_optimum(summ: pd.DataFrame, envs: dict) -> pd.DataFrame:
-    """Attach the exact optimum of each env × fail_prob (value iteration, :mod:`hnsdt.oracle`) and every
+    """Attach the exact optimum of each env × fail_prob (value iteration, :mod:`hnsdt.envs.oracle`) and every
     method's ratios to it: success / optimal success, steps / optimal expected steps, and the regret
     V* − V^π in expected return."""
-    from hnsdt.oracle import optimum
+    from hnsdt.envs.oracle import optimum
 
     opt = {(e, f): optimum(envs[e].layout, f, envs[e].max_steps) for e, f in set(zip(summ.env, summ.fail_prob))}
     out = summ.copy()
@@ -310,8 +310,8 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
                  out_dir: str | Path, datasets: str | Path, progress: bool = True,
                  recordings_dir: str | Path | None = None,
                  compute=None, provenance: dict | None = None) -> pd.DataFrame:
-    """Run every cell of ``settings`` (:class:`hnsdt.config.EvaluateSettings`) on ``envs`` (name ->
-    :class:`hnsdt.config.EnvSpec`) and ``compute``'s executor, write ``episodes.csv``, ``summary.csv``,
+    """Run every cell of ``settings`` (:class:`hnsdt.core.config.EvaluateSettings`) on ``envs`` (name ->
+    :class:`hnsdt.core.config.EnvSpec`) and ``compute``'s executor, write ``episodes.csv``, ``summary.csv``,
     ``metrics.json`` under ``out_dir`` and the episode recordings (of the first seed) under ``recordings_dir``
     (default: ``recordings`` beside ``out_dir``), each built in a temporary folder and moved into place when
     complete. ``datasets``: the root of the collected datasets (Theorem 2's training segment counts).
@@ -320,11 +320,11 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
     time-based id: the tables are the same bytes on every run, the ``.rrd`` files cannot be.
 
     ``executors`` holds the planner settings of each arm (``{"ours": ..., "paper": ...}``,
-    :func:`hnsdt.config.executor_config`)."""
+    :func:`hnsdt.core.config.executor_config`)."""
     import json
 
-    from hnsdt.compute import Compute, run_tasks
-    from hnsdt.fileio import atomic_dir
+    from hnsdt.core.compute import Compute, run_tasks
+    from hnsdt.core.fileio import atomic_dir
     from hnsdt.logs import LAYOUT_NAME, record_from_episode, write_layout, write_mcap, write_rrd
 
     missing = set(ARMS) - set(executors)
@@ -395,7 +395,7 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
 
 @lru_cache(maxsize=None)
 def _optimum(layout: Layout, fail_prob: float, max_steps: int) -> tuple[float, float]:
-    from hnsdt.oracle import optimum
+    from hnsdt.envs.oracle import optimum
 
     best = optimum(layout, fail_prob, max_steps)
     return float(best.steps), float(best.success)
@@ -435,9 +435,9 @@ def evaluate_layouts(methods: list[str], seeds: list[int], sources: tuple, fail_
     """Every method × seed on every source, ``episodes`` per layout and fail_prob, the checkpoints of view models
     at ``models_root/<method>/seed<K>``; write ``episodes.csv``, ``summary.csv`` (:func:`layout_summary`),
     ``segments.csv`` and ``layouts.csv`` under ``out_dir``, with the exact optimum per layout and fail_prob."""
-    from hnsdt.compute import Compute, run_tasks
-    from hnsdt.fileio import atomic_dir
-    from hnsdt.methods import METHODS
+    from hnsdt.core.compute import Compute, run_tasks
+    from hnsdt.core.fileio import atomic_dir
+    from hnsdt.core.methods import METHODS
     from hnsdt.models.checkpoint import load_checkpoint
 
     tasks = []

@@ -18,10 +18,10 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
 
-from hnsdt.fileio import atomic_dir  # noqa: E402
-from hnsdt.params import Params  # noqa: E402
-from hnsdt.methods import METHODS, PAPER_ARM, PARADIGMS, PROPOSED  # noqa: E402
-from hnsdt.provenance import git_revision, params_digest  # noqa: E402
+from hnsdt.core.fileio import atomic_dir  # noqa: E402
+from hnsdt.core.params import Params  # noqa: E402
+from hnsdt.core.methods import METHODS, PAPER_ARM, PARADIGMS, PROPOSED  # noqa: E402
+from hnsdt.core.provenance import git_revision, params_digest  # noqa: E402
 
 METHOD_LABELS = {name: m.label for name, m in METHODS.items()}
 METRICS = [("success", "success rate"), ("steps", "steps (successful episodes)"), ("reward", "average reward")]
@@ -481,7 +481,7 @@ def decomposition_lines(results: Path, method: str) -> list[str]:
     against the minimum expected for the sub-goals set (``optimal_steps``), the share of first actions that are
     right and of sub-goals reached within their allowance; then the replans per episode by reason."""
     from hnsdt.agents.executor import REPLAN_REASONS
-    from hnsdt.methods import CONTROLLER_FLOOR
+    from hnsdt.core.methods import CONTROLLER_FLOOR
 
     seg_path, ep_path = results / "segments.csv", results / "episodes.csv"
     if not seg_path.is_file() or not ep_path.is_file():
@@ -559,9 +559,9 @@ def _largest_informative_d(m: int, K: int, delta: float) -> float:
 def theorem_sections(params: Params, results: Path, summ: pd.DataFrame, episodes: pd.DataFrame) -> tuple[dict, dict]:
     """The two theorems checked on the measurements: the template's context for their sections (empty when
     the inputs are missing) and their rows for ``theorems.json``."""
-    from hnsdt.config import env_spec
+    from hnsdt.core.config import env_spec
     from hnsdt.evaluation.theorems import theorem1, theorem2
-    from hnsdt.oracle import optimum
+    from hnsdt.envs.oracle import optimum
 
     if not (results / "segments.csv").is_file() or "regret" not in summ or params.theorems is None:
         return {}, {}
@@ -632,7 +632,7 @@ def unseen_decomposition(results: Path, episodes: pd.DataFrame, method: str = PR
     (``segments.csv``; ``episodes``: the ``episodes.csv`` beside it); and per split the measured cause behind
     :func:`target_lines`: ``{split: (steps / minimum of its GoTo sub-goals, share of their actions on a shortest
     path, shares achieved, overran and still open at the episode's end)}``."""
-    from hnsdt.methods import CONTROLLER_FLOOR
+    from hnsdt.core.methods import CONTROLLER_FLOOR
 
     seg_path = results / "segments.csv"
     if not seg_path.is_file() or seg_path.stat().st_size < 2:
@@ -789,7 +789,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
     episodes[["rrd", "mcap"]] = episodes[["rrd", "mcap"]].fillna("")  # recording paths: empty when not recorded
     with atomic_dir(out) as tmp:
         (tmp / "figures").mkdir(parents=True)
-        from hnsdt.config import env_spec
+        from hnsdt.core.config import env_spec
 
         layouts = {e: env_spec(params, e) for e in dict.fromkeys(summ.env)}
         environment_figure(layouts, tmp / "figures" / "environments.png")
@@ -850,7 +850,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
         (tmp / "provenance.json").write_text(json.dumps(
             {"git_revision": rev, "params_digest": digest, "inputs": inputs}, indent=2, sort_keys=True) + "\n")
         if headline is not None:
-            from hnsdt.fileio import atomic_file
+            from hnsdt.core.fileio import atomic_file
 
             unseen_summary = pd.read_csv(generalisation / "summary.csv") if generalisation is not None else None
             with atomic_file(headline) as tmp_headline:

@@ -8,7 +8,7 @@ in the theorem's own units: values are discounted returns with the theorem's γ,
 (a step costs |r_step| = 0.1). Estimated from evaluation episodes of a plan-following method, per env × fail_prob:
 
 * measured side: V*_γ(s₀) − V^π_γ(s₀), with V*_γ the exact optimum (value iteration with discount γ,
-  :mod:`hnsdt.oracle`) and V^π_γ the mean discounted return of the episodes
+  :mod:`hnsdt.envs.oracle`) and V^π_γ the mean discounted return of the episodes
   (Σ_{t<T} γ^t r_step + 1{success} γ^{T−1} r_goal);
 * ε_sym: the executed initial plan's extra cost over the cheapest plan, |r_step| × (extra steps without
   failures) — undiscounted, so an upper bound on the discounted extra cost;
@@ -37,7 +37,7 @@ import numpy as np
 import pandas as pd
 
 from hnsdt.envs.keydoor import GOAL_REWARD, STEP_REWARD
-from hnsdt.methods import PROPOSED
+from hnsdt.core.methods import PROPOSED
 
 
 def step_cost(steps, gamma: float) -> np.ndarray:

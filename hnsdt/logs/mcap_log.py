@@ -14,7 +14,7 @@ from foxglove.messages import Log, LogLevel, RawImage, Timestamp
 
 from hnsdt.envs.keydoor import ACTION_NAMES
 from hnsdt.envs.render import render_rgb
-from hnsdt.fileio import atomic_file
+from hnsdt.core.fileio import atomic_file
 from hnsdt.logs.record import EpisodeRecord
 from hnsdt.symbolic.subgoals import ID_TO_NAME
 

@@ -13,7 +13,7 @@ import rerun.blueprint as rrb
 
 from hnsdt.envs.keydoor import ACTION_NAMES
 from hnsdt.envs.render import CELL_PX, CLASS_ID, CLASSES, COLOURS, cell_classes
-from hnsdt.fileio import atomic_file
+from hnsdt.core.fileio import atomic_file
 from hnsdt.logs.record import EpisodeRecord
 from hnsdt.symbolic.subgoals import ID_TO_NAME
 

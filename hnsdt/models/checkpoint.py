@@ -1,6 +1,6 @@
 """Checkpoints of every learned model: a folder with ``model.safetensors`` (weights) and ``config.json``
 (``arch``, the model's config dataclass under ``model``, and training facts). The architectures are the
-networks of the method registry (:mod:`hnsdt.methods`): each model class names its ``arch`` and
+networks of the method registry (:mod:`hnsdt.core.methods`): each model class names its ``arch`` and
 ``config_class``."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from pathlib import Path
 import torch
 from safetensors.torch import load_file, save_file
 
-from hnsdt.fileio import atomic_dir
-from hnsdt.methods import architectures, resolve
+from hnsdt.core.fileio import atomic_dir
+from hnsdt.core.methods import architectures, resolve
 
 
 

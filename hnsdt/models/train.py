@@ -134,7 +134,7 @@ def train_dt(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bo
 def train_decision_transformer(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, progress: bool = True,
                                desc: str = "train", network: type = DecisionTransformer,
                                state: FitState | None = None, stop_after: int | None = None, measure=None):
-    """The registry's trainer (:mod:`hnsdt.methods`): :func:`train_dt` and the data it used, or the
+    """The registry's trainer (:mod:`hnsdt.core.methods`): :func:`train_dt` and the data it used, or the
     :class:`~hnsdt.models.fit.FitState` of a run stopped after ``stop_after`` epochs. ``measure``: the
     validation measure when not the held-out loss (:func:`validation_for`; its ``name`` keys the record)."""
     validation = validation_for(frames, model_cfg, cfg, measure)

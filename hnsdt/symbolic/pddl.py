@@ -16,7 +16,7 @@ from __future__ import annotations
 from itertools import combinations
 from pathlib import Path
 
-from hnsdt.fileio import atomic_file
+from hnsdt.core.fileio import atomic_file
 from hnsdt.envs.layout import Cell, Layout, reachable_cells
 from hnsdt.symbolic.abstraction import SymbolicState
 

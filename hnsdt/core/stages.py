@@ -1,4 +1,4 @@
-"""The pipeline's stages as functions: each takes the validated params (:func:`hnsdt.config.load_params`) and
+"""The pipeline's stages as functions: each takes the validated params (:func:`hnsdt.core.config.load_params`) and
 explicit paths, does its work on the executor of ``compute`` and writes its outputs, each complete or absent.
 
 The DVC stage scripts in ``pipeline/`` call them directly (so a stage depends on this module, not on the
@@ -12,19 +12,19 @@ import sys
 from pathlib import Path
 from typing import Callable
 
-from hnsdt.config import Params, compute_settings, load_params
+from hnsdt.core.config import Params, compute_settings, load_params
 
 
 def _provenance(params: Params) -> dict:
     """What the outputs cite: the code's git revision and the params' digest."""
-    from hnsdt.provenance import git_revision, params_digest
+    from hnsdt.core.provenance import git_revision, params_digest
 
     return {"git_revision": git_revision(), "params_digest": params_digest(params)}
 
 
 def collect(params: Params, env: str, out: Path, repo_id: str | None = None, progress: bool = True) -> Path:
     """Stage `collect@ENV`: exploration episodes on one env as a LeRobot dataset at ``out``."""
-    from hnsdt.config import collect_config
+    from hnsdt.core.config import collect_config
     from hnsdt.data.collect import collect_dataset
 
     root = collect_dataset(collect_config(params, env), out, repo_id or f"local/{env}", progress=progress,
@@ -38,7 +38,7 @@ def train(params: Params, env: str, method: str, dataset: Path, out: Path, curve
     """Stages `train`, `train_offline`, `train_online`: one method on one env, every seed (``train.seeds``
     unless ``seeds``) a task on ``compute``'s executor. Same seed, same weights, whatever the executor and
     however many workers (tested)."""
-    from hnsdt.config import env_spec, train_settings
+    from hnsdt.core.config import env_spec, train_settings
     from hnsdt.training import plan_runs, train_all
 
     ts = train_settings(params)
@@ -58,10 +58,10 @@ def evaluate(params: Params, models: Path, datasets: Path, out: Path, recordings
     git, so the README's table and `dvc plots show` work on a fresh clone)."""
     import shutil
 
-    from hnsdt.config import env_spec, evaluate_settings, executor_config
+    from hnsdt.core.config import env_spec, evaluate_settings, executor_config
     from hnsdt.evaluation.evaluate import evaluate_all, summary
-    from hnsdt.fileio import atomic_file
-    from hnsdt.methods import ARMS
+    from hnsdt.core.fileio import atomic_file
+    from hnsdt.core.methods import ARMS
 
     settings = evaluate_settings(params)
     envs = {e: env_spec(params, e) for e in settings.envs}

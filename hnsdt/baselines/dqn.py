@@ -14,7 +14,7 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from hnsdt.agents.baselines.online import OnlineAgent, OnlineConfig, OnlineRun, linear_schedule, start_run
+from hnsdt.baselines.online import OnlineAgent, OnlineConfig, OnlineRun, linear_schedule, start_run
 from hnsdt.envs.keydoor import N_ACTIONS
 from hnsdt.envs.layout import Layout
 from hnsdt.models.qnetwork import QNetwork, QNetworkConfig
@@ -90,5 +90,5 @@ class DQNAgent(OnlineAgent):
 
 
 def make_agent(model, meta: dict, layout, executor, epsilon: float = 0.0, seed: int = 0) -> DQNAgent:
-    """The registry's agent factory (:mod:`hnsdt.methods`)."""
+    """The registry's agent factory (:mod:`hnsdt.core.methods`)."""
     return DQNAgent(model, epsilon, seed, layout)

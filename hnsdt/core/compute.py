@@ -103,7 +103,7 @@ def _run_ray(fn: Callable, tasks: list, compute: Compute, bar) -> list:
         import ray
     except ImportError:
         raise RuntimeError("compute.executor is ray but Ray is not installed: pip install -e '.[ray]'") from None
-    from hnsdt.reproducible import PINNED_CPU
+    from hnsdt.core.reproducible import PINNED_CPU
 
     if not ray.is_initialized():
         env = {k: os.environ.get(k, v) for k, v in PINNED_CPU.items()} | {"PYTHONHASHSEED": "0"}

@@ -24,7 +24,7 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from hnsdt.agents.baselines.online import OnlineAgent, OnlineConfig, OnlineRun, linear_schedule, start_run
+from hnsdt.baselines.online import OnlineAgent, OnlineConfig, OnlineRun, linear_schedule, start_run
 from hnsdt.envs.layout import Layout
 from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig
 
@@ -152,5 +152,5 @@ class OptionsAgent(OnlineAgent):
 
 
 def make_agent(model, meta: dict, layout, executor, epsilon: float = 0.0, seed: int = 0) -> OptionsAgent:
-    """The registry's agent factory (:mod:`hnsdt.methods`)."""
+    """The registry's agent factory (:mod:`hnsdt.core.methods`)."""
     return OptionsAgent(model, epsilon, seed, layout)

@@ -1,8 +1,8 @@
 """params.yaml -> the library's typed settings.
 
-The schema of the file (every knob's type, range, default and meaning) is :mod:`hnsdt.params`. This module
+The schema of the file (every knob's type, range, default and meaning) is :mod:`hnsdt.core.params`. This module
 loads a params file and validates it there once (bad input stops with one line naming the file and the key):
-:func:`load_params` returns the :class:`~hnsdt.params.Params` model that every stage takes, and the functions
+:func:`load_params` returns the :class:`~hnsdt.core.params.Params` model that every stage takes, and the functions
 below turn its sections into the frozen settings each stage runs with (an :class:`EnvSpec`, the planner's
 :class:`~hnsdt.agents.executor.ExecutorConfig`, :class:`TrainSettings`, :class:`BaselineSettings`,
 :class:`EvaluateSettings`). Nothing below the command line reads a params mapping.
@@ -21,8 +21,8 @@ from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.data.collect import POLICIES, Behaviour, CollectConfig
 from hnsdt.envs import ENV_IDS, LayoutError, load_layout
 from hnsdt.envs.layout import Layout
-from hnsdt.methods import BASELINES, DT_METHODS, METHODS, PROPOSED, resolve
-from hnsdt.params import SECTIONS, Params, ParamsError, validate
+from hnsdt.core.methods import BASELINES, DT_METHODS, METHODS, PROPOSED, resolve
+from hnsdt.core.params import SECTIONS, Params, ParamsError, validate
 
 __all__ = ["ParamsError", "Params", "load_params", "EnvSpec", "env_spec", "executor_config", "method_executor",
            "collect_config", "layout_collect_config", "model_config", "TrainSettings", "train_settings", "BaselineSettings",
@@ -294,8 +294,8 @@ def eval_epsilon(params: Params, method: str) -> float:
 
 
 def compute_settings(params: Params, executor: str | None = None, workers: int | None = None):
-    """Where runs execute (``compute``), with command-line overrides; see :mod:`hnsdt.compute`."""
-    from hnsdt.compute import Compute
+    """Where runs execute (``compute``), with command-line overrides; see :mod:`hnsdt.core.compute`."""
+    from hnsdt.core.compute import Compute
 
     compute = params.compute
     try:

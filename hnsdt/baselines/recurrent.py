@@ -112,5 +112,5 @@ class RecurrentAgent:
 
 
 def make_agent(model: RecurrentPolicy, meta: dict, layout, executor, epsilon: float = 0.0, seed: int = 0):
-    """The registry's agent factory (:mod:`hnsdt.methods`)."""
+    """The registry's agent factory (:mod:`hnsdt.core.methods`)."""
     return RecurrentAgent(model, layout)

@@ -1,10 +1,10 @@
 """The schema of ``params.yaml``: every knob's type, range, default and meaning, in one place.
 
 :func:`validate` checks a whole params file against it before any work starts: an unknown key, a wrong type or
-an out-of-range value stops with one line naming the key. :mod:`hnsdt.config` turns the validated sections into
+an out-of-range value stops with one line naming the key. :mod:`hnsdt.core.config` turns the validated sections into
 the library's configs. The learned baselines' own knobs (``baselines.<method>``) are the training and network
-config dataclasses their registry entries name (:mod:`hnsdt.methods`), checked by
-:func:`hnsdt.config.baseline_settings`.
+config dataclasses their registry entries name (:mod:`hnsdt.core.methods`), checked by
+:func:`hnsdt.core.config.baseline_settings`.
 """
 
 from __future__ import annotations
@@ -16,8 +16,8 @@ from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError,
 from hnsdt.data.collect import POLICIES, STARTS
 from hnsdt.models.windows import FORMULATIONS, LOSS_STEPS
 from hnsdt.envs.generate import FAMILIES
-from hnsdt.compute import EXECUTORS
-from hnsdt.methods import BASELINES, DT_METHODS, LEARNED, METHODS, OFFLINE_BASELINES, ONLINE_BASELINES
+from hnsdt.core.compute import EXECUTORS
+from hnsdt.core.methods import BASELINES, DT_METHODS, LEARNED, METHODS, OFFLINE_BASELINES, ONLINE_BASELINES
 from hnsdt.symbolic.operators import OPERATOR_SETS
 from hnsdt.symbolic.planner import PLAN_MODES
 
@@ -121,7 +121,7 @@ class TrainParams(Section):
 
 class BaselinesParams(BaseModel):
     """``offline`` / ``online``: which baselines train; ``<method>``: that method's knobs (its config
-    dataclasses, checked by :func:`hnsdt.config.baseline_settings`)."""
+    dataclasses, checked by :func:`hnsdt.core.config.baseline_settings`)."""
 
     model_config = ConfigDict(extra="allow", strict=True, frozen=True)
 
@@ -269,7 +269,7 @@ class Params(Section):
 
     @property
     def raw(self) -> dict:
-        """The file's mapping as written, before defaults: what :func:`hnsdt.provenance.params_digest` hashes."""
+        """The file's mapping as written, before defaults: what :func:`hnsdt.core.provenance.params_digest` hashes."""
         return self._raw
 
     def error(self, msg: str) -> ParamsError:
