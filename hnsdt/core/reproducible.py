@@ -1,4 +1,5 @@
-"""Same seed, same bytes — on any x86-64 machine, not only the one that made them.
+"""Same seed, same bytes — on one machine, and across the x86-64 machines measured (an AMD EPYC and a machine
+without AVX-512; an Intel Xeon with AVX-512-FP16 still gave other model bytes: docs/reproducibility.md).
 
 Seeding fixes the random streams; the numerics still depend on which kernels the CPU runs. Measured with
 ``benchmarks/cpu_determinism.py`` (a DT and an option-critic trained for a few steps, weights hashed), each of
