@@ -1,8 +1,12 @@
+import atexit
 import os
+import shutil
 import tempfile
 
-# Nothing may reach a model/dataset hub from the tests: a private, empty HF home and offline mode.
+# Nothing may reach a model/dataset hub from the tests: a private, empty HF home (removed when the test process
+# ends: every pytest-xdist worker has its own) and offline mode.
 os.environ["HF_HOME"] = tempfile.mkdtemp(prefix="hnsdt-hf-home-")
+atexit.register(shutil.rmtree, os.environ["HF_HOME"], ignore_errors=True)
 os.environ["HF_HUB_OFFLINE"] = "1"
 os.environ.setdefault("MPLBACKEND", "Agg")
 
