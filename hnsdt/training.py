@@ -260,8 +260,7 @@ def layout_network_configs(params: Params, method: str, seed: int, layout: Layou
     entry = lookup_method(method)
     if not entry.view_network:
         raise ValueError(f"generalisation: {method} has no network that reads views")
-    lay = layout
-    env = EnvSpec(g.family, f"hnsdt/generated-{g.family}", lay, g.max_steps)
+    env = EnvSpec(g.family, f"hnsdt/generated-{g.family}", layout, g.max_steps)
     view_cls = resolve(entry.view_network).config_class
     if entry.stage == "train":  # a decision transformer: `train` and `models.<family>`
         ts, models = train_settings(params), params.models
@@ -269,7 +268,7 @@ def layout_network_configs(params: Params, method: str, seed: int, layout: Layou
             raise params.error(f"missing key models.{g.family} (the decision transformers' size on the "
                                f"generalisation family {g.family})")
         try:
-            cfg = view_config(entry.condition, lay.n_flags, g.view_radius, g.max_offset, g.conv_layers,
+            cfg = view_config(entry.condition, layout.n_flags, g.view_radius, g.max_offset, g.conv_layers,
                               g.value_iterations, max_timestep=g.max_steps, dropout=params.train.dropout,
                               formulation=ts.formulation[method],
                               **models[g.family].model_dump())
@@ -292,7 +291,7 @@ def layout_network_configs(params: Params, method: str, seed: int, layout: Layou
 
 def _budget_on_validation_layouts(params: Params, method: str) -> bool:
     """Does ``method`` (a DT with a ``train.validation`` entry) stop at the plateau of its steps to the exit on
-    the validation layouts (:class:`hnsdt.training.StepsToExit`)?"""
+    the validation layouts (:class:`StepsToExit`)?"""
     return (lookup_method(method).stage == "train" and params.need("generalisation").validation_layouts > 0
             and method in params.train.validation)
 
@@ -335,7 +334,7 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
         data = load_frames(dataset, method_executor(params, method).operators)  # (the paper's arm: Move labels)
         facts = {"dataset": str(dataset), "family": g.family,
                  "target_return": float(data.returns_to_go[np.unique(data.episode_start)].max())}
-    net_cfg, train_cfg = layout_network_configs(params, method, g.seeds[0], layouts[0])  # (the layouts are generated once)
+    net_cfg, train_cfg = layout_network_configs(params, method, g.seeds[0], layouts[0])
     wanted = list(getattr(train_cfg, "behaviours", ()))
     if not online and wanted and not np.isin(data.policy, wanted).any():
         raise ValueError(f"{method} learns from {wanted} episodes and {dataset} holds none; set "

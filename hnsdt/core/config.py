@@ -18,15 +18,15 @@ from typing import Any
 import yaml
 
 from hnsdt.agents.executor import ExecutorConfig
+from hnsdt.core.methods import BASELINES, DT_METHODS, METHODS, PROPOSED, resolve
+from hnsdt.core.params import SECTIONS, Params, ParamsError, validate
 from hnsdt.data.collect import POLICIES, Behaviour, CollectConfig
 from hnsdt.envs import ENV_IDS, LayoutError, load_layout
 from hnsdt.envs.layout import Layout
-from hnsdt.core.methods import BASELINES, DT_METHODS, METHODS, PROPOSED, resolve
-from hnsdt.core.params import SECTIONS, Params, ParamsError, validate
 
 __all__ = ["ParamsError", "Params", "load_params", "EnvSpec", "env_spec", "executor_config", "method_executor",
-           "collect_config", "layout_collect_config", "model_config", "TrainSettings", "train_settings", "BaselineSettings",
-           "baseline_settings", "fill", "compute_settings", "EvaluateSettings", "evaluate_settings"]
+           "collect_config", "layout_collect_config", "model_config", "TrainSettings", "train_settings",
+           "BaselineSettings", "baseline_settings", "fill", "compute_settings", "EvaluateSettings", "evaluate_settings"]
 
 
 def load_params(path: str | Path = "params.yaml", overrides=()) -> Params:
@@ -115,9 +115,10 @@ def collect_config(params: Params, name: str) -> CollectConfig:
 
 
 def layout_collect_config(params: Params) -> CollectConfig:
-    """The unseen-layout experiment's collection on its training layouts (``layout`` is left None): ``collect``'s seed, fps, licence and fail_probs, the
-    noisy planner of ``planner``, ``generalisation.episodes_per_layout`` per start, and
-    ``generalisation.random_episodes_per_layout`` random walks (the paper's arm's data)."""
+    """The unseen-layout experiment's collection on its training layouts (``layout`` is left None):
+    ``collect``'s seed, fps, licence and fail_probs, the noisy planner of ``planner``,
+    ``generalisation.episodes_per_layout`` per start, and ``generalisation.random_episodes_per_layout`` random walks
+    (the paper's arm's data)."""
     g, collect = params.need("generalisation"), params.need("collect")
     behaviours = [Behaviour("noisy_planner", g.episodes_per_layout, start, g.epsilon) for start in ("layout", "random")]
     if g.random_episodes_per_layout:

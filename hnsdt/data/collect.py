@@ -17,7 +17,7 @@ files.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -165,8 +165,6 @@ def collect_on_layouts(cfg: CollectConfig, layouts: list[Layout], root: str | Pa
     """Collect ``cfg``'s behaviours on every layout of ``layouts`` (each its own batch seeds) and write one
     dataset whose frames also store the local view of ``view_radius`` and their layout's index; its card cites
     ``provenance``. ``cfg.layout`` is ignored: the layouts' list takes its place."""
-    from dataclasses import replace
-
     from hnsdt.data.card import card_arguments
     from hnsdt.data.lerobot_io import write_dataset
 

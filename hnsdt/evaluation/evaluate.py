@@ -437,17 +437,17 @@ def evaluate_layouts(methods: list[str], seeds: list[int], sources: tuple, fail_
     ``segments.csv`` and ``layouts.csv`` under ``out_dir``, with the exact optimum per layout and fail_prob."""
     from hnsdt.core.compute import Compute, run_tasks
     from hnsdt.core.fileio import atomic_dir
-    from hnsdt.core.methods import METHODS
     from hnsdt.models.checkpoint import load_checkpoint
 
     tasks = []
     for method in methods:
         for seed in seeds:
             model, meta = None, {}
-            if lookup_method(method).training != "none":
+            entry = lookup_method(method)
+            if entry.training != "none":
                 path = Path(models_root) / method / f"seed{seed}"
                 model, meta = load_checkpoint(path)
-                if meta.get("arch") != resolve(METHODS[method].view_network).arch:
+                if meta.get("arch") != resolve(entry.view_network).arch:
                     raise ValueError(f"{path} is not a view model (train it with `python pipeline/generalisation.py "
                                      f"train --method {method}`)")
             tasks.append(EvalTask(method, seed, executors[method], model, meta, epsilons.get(method, 0.0),
@@ -456,7 +456,8 @@ def evaluate_layouts(methods: list[str], seeds: list[int], sources: tuple, fail_
     table = pd.DataFrame([row for batches in results for rows, _ in batches for row in rows])
     segments = pd.DataFrame([row for batches in results for _, rows in batches for row in rows])
     optimal = {(s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fail_probs}
-    table["optimal_steps"], table["optimal_success"] = zip(*(optimal[key] for key in zip(table.layout, table.fail_prob)))
+    table["optimal_steps"], table["optimal_success"] = zip(*(optimal[key]
+                                                            for key in zip(table.layout, table.fail_prob)))
     with atomic_dir(Path(out_dir)) as tmp:
         tmp.mkdir()
         table.to_csv(tmp / "episodes.csv", index=False, float_format="%.6g")
