@@ -36,6 +36,7 @@ from hnsdt.core.reproducible import pin_process
 pin_process()
 
 from hnsdt import generalisation as gen  # noqa: E402
+from hnsdt.core import stages  # noqa: E402
 from hnsdt.core.config import compute_settings, load_params  # noqa: E402
 from hnsdt.core.params import validate  # noqa: E402
 from hnsdt.evaluation import ablations  # noqa: E402
@@ -95,11 +96,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         t0 = time.perf_counter()
-        dataset = gen.collect(params, tmp / "dataset", {}, progress=False)
+        dataset = stages.collect_unseen(params, tmp / "dataset", progress=False, provenance={})
         times["collect"] = time.perf_counter() - t0
         for method in g["methods"] + g["baselines"]:
             t0 = time.perf_counter()
-            runs = gen.plan_runs(params, method, dataset)
+            runs = stages.plan_unseen(params, method, dataset)
             train_all(runs, g["family"], tmp / "models" / method, tmp / "curves" / method, compute, progress=False)
             times[f"train {method}"] = time.perf_counter() - t0
             kept = kept_validation(tmp / "models" / method, g["seeds"])
@@ -118,7 +119,7 @@ def main() -> None:
                 validation += validation_lines(kept, method, f" (relabel round {r + 1})")
                 best[method] = mean_validation(kept)
         t0 = time.perf_counter()
-        gen.evaluate(params, tmp / "models", tmp / "results", compute, progress=False)
+        stages.evaluate_unseen(params, tmp / "models", tmp / "results", compute, progress=False)
         times["evaluate"] = time.perf_counter() - t0
         table = generalisation_table(pd.read_csv(tmp / "results/summary.csv"))
         per_map = drawn_lines(pd.read_csv(tmp / "results/episodes.csv"))
@@ -207,7 +208,7 @@ def relabelled_run(params, run, models: Path, episodes: int):
     from hnsdt.core.config import method_executor
     from hnsdt.data.relabel import RELABELLED, join_frames, learner_frames
 
-    g = gen.settings(params)
+    g = params.need("generalisation")
     model, meta = load_checkpoint(models / f"seed{run.seed}")
     frames = learner_frames(model, run.method, meta, [s.layout for s in gen.training_layouts(params)],
                             method_executor(params, run.method), g.view_radius, g.max_steps,

@@ -1,6 +1,5 @@
 """The unseen-layout experiment (``generalisation`` in params.yaml; docs/unseen-layouts.md): do the learned
-methods transfer to maps they were not trained on? This module holds what is its own, the layout splits; its
-stages run through the same code as the paper protocol's (:mod:`hnsdt.core.stages`).
+methods transfer to maps they were not trained on? This module holds what is its own: the layout splits.
 
 **Splits** (:func:`layout_splits`): ``train`` = the family's generated layouts of seeds ``0..N-1``, ``heldout`` =
 seeds from :data:`HELDOUT_SEED` on, ``minigrid`` = grids the ``minigrid`` package's own DoorKey generator makes,
@@ -9,11 +8,8 @@ maps of any shape). ``validation`` (:func:`validation_layouts`, seeds from :data
 training budgets are chosen, and is never evaluated. A generated layout whose grid is already in an earlier
 split is skipped, so no two splits share a map; every layout is checked usable first (:func:`check_sources`).
 
-**Stages**: :func:`collect` (noisy-planner episodes on every training layout, one LeRobot dataset with local
-views, :func:`hnsdt.data.collect.collect_on_layouts`), :func:`plan_runs` (each method's view network, offline on
-the dataset, online on the layouts, :func:`hnsdt.training.plan_layout_runs`), :func:`evaluate` (every method ×
-seed × layout × fail_prob and the symbolic reference, beside the exact optimum,
-:func:`hnsdt.evaluation.evaluate.evaluate_layouts`).
+Its stages (:func:`hnsdt.core.stages.collect_unseen`, ``plan_unseen``, ``train_unseen``, ``evaluate_unseen``) read
+these splits and run the paper protocol's collection, training and evaluation code.
 """
 
 from __future__ import annotations
@@ -21,11 +17,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-import pandas as pd
-
-from hnsdt.core.config import Params, eval_epsilon, layout_collect_config, method_executor
+from hnsdt.core.config import Params
 from hnsdt.envs.layout import Layout
-from hnsdt.core.methods import REFERENCE
 
 HELDOUT_SEED = 100_000  # held-out layouts are the family's seeds from here on
 VALIDATION_SEED = 200_000  # and validation layouts from here on
@@ -45,6 +38,7 @@ class Source:
 
 
 def settings(params: Params):
+    """The experiment's section of params.yaml."""
     return params.need("generalisation")
 
 
@@ -129,46 +123,3 @@ def check_sources(sources: list[Source], fail_prob: float) -> None:
                          "every split's flags)")
     for src in sources:
         check_usable(src.layout, src.max_steps, fail_prob)
-
-
-def collect(params: Params, root: str | Path, provenance: dict, progress: bool = True) -> Path:
-    """Collect on every training layout and write one LeRobot dataset with views (atomically)."""
-    from hnsdt.data.collect import collect_on_layouts
-
-    g, cfg = settings(params), layout_collect_config(params)
-    train = training_layouts(params)
-    check_sources(train, max(cfg.fail_probs))
-    return collect_on_layouts(cfg, [s.layout for s in train], root, f"local/generated-{g.family}", g.view_radius,
-                              g.family, progress, provenance)
-
-
-def network_configs(params: Params, method: str, seed: int):
-    """``(view network config, training config)`` of one method and seed
-    (:func:`hnsdt.training.layout_network_configs`)."""
-    from hnsdt.training import layout_network_configs
-
-    return layout_network_configs(params, method, seed, training_layouts(params)[0].layout)
-
-
-def plan_runs(params: Params, method: str, dataset: str | Path) -> list:
-    """One :class:`hnsdt.training.TrainTask` per seed, on the training layouts, budgets on the validation ones."""
-    from hnsdt.training import plan_layout_runs
-
-    return plan_layout_runs(params, method, dataset, [s.layout for s in training_layouts(params)],
-                            lambda: [s.layout for s in validation_layouts(params)])
-
-
-def evaluate(params: Params, models_root: str | Path, out_dir: str | Path, compute=None,
-             progress: bool = True) -> pd.DataFrame:
-    """Every method × seed on every evaluated layout, the symbolic baseline as the reference
-    (:func:`hnsdt.evaluation.evaluate.evaluate_layouts`)."""
-    from hnsdt.evaluation.evaluate import evaluate_layouts
-
-    g = settings(params)
-    fps = tuple(float(f) for f in params.need("evaluate").fail_probs)
-    sources = tuple(layout_splits(params, evaluated_only=True))
-    check_sources(sources, max(fps))
-    methods = [*g.learned, REFERENCE]
-    return evaluate_layouts(methods, list(g.seeds), sources, fps, g.episodes,
-                            {m: method_executor(params, m) for m in methods},  # (the paper's arm plans over Move)
-                            {m: eval_epsilon(params, m) for m in g.learned}, models_root, out_dir, compute, progress)

@@ -10,6 +10,7 @@ import yaml
 
 from hnsdt.envs import KeyDoorVectorEnv, LayoutError, load_layout
 from hnsdt.envs.generate import FAMILIES, FamilySizes, check_usable, generate, write_layout
+from hnsdt.core import stages
 from hnsdt.core.params import validate
 from hnsdt.envs.observation import (DOOR_CLOSED, DOOR_OPEN, EXIT, FLOOR, ITEM, KEY, OUTSIDE, WALL, full_view,
                                     local_view)
@@ -235,14 +236,13 @@ def test_the_lstm_and_gru_read_the_decision_transformers_view_encoder(tmp_path):
     get the same convolutions as the decision transformers' (the online learners keep their one-hot MLP)."""
     import torch
 
-    from hnsdt import generalisation as gen
     from hnsdt.core.methods import METHODS, resolve
 
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"].update(conv_layers=2)
-    dt, _ = gen.network_configs(validate(params), "hnsdt", 0)
+    dt, _ = network_configs(validate(params), "hnsdt", 0)
     for method in ("lstm_hier", "gru"):
-        cfg, _ = gen.network_configs(validate(params), method, 0)
+        cfg, _ = network_configs(validate(params), method, 0)
         assert cfg.conv_layers == dt.conv_layers == 2
         model = resolve(METHODS[method].view_network)(cfg)
         assert len([m for m in model.view.convs if isinstance(m, torch.nn.Conv2d)]) == 2
@@ -398,6 +398,14 @@ def test_a_view_dt_trained_on_a_handful_of_maps_reaches_its_sub_goals_on_maps_it
     assert trained >= 0.4 and trained - before >= 0.3, (trained, before)
 
 
+def network_configs(params, method: str, seed: int):
+    """``(view network config, training config)`` of one method and seed of the experiment."""
+    from hnsdt import generalisation as gen
+    from hnsdt.training import layout_network_configs
+
+    return layout_network_configs(params, method, seed, gen.training_layouts(params)[0].layout)
+
+
 # -- the protocol: every learned method on views, the layout pool, the dataset, the stages' functions --------
 
 def _tiny_generalisation_params(tmp_path) -> dict:
@@ -505,7 +513,8 @@ def test_the_dataset_over_generated_layouts_stores_each_frames_view(tmp_path):
     from hnsdt.models.view import view_states
 
     params = _tiny_generalisation_params(tmp_path)
-    root = gen.collect(validate(params), tmp_path / "ds", {"git_revision": "test"}, progress=False)
+    root = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False,
+                                provenance={"git_revision": "test"})
     ds = open_dataset(root)
     cols = ds.hf_dataset.with_format("numpy")[:]
     layouts = [s.layout for s in gen.layout_splits(validate(params)) if s.split == "train"]
@@ -526,7 +535,6 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     split, the symbolic reference included, and the exact optimum's steps."""
     import pandas as pd
 
-    from hnsdt import generalisation as gen
     from hnsdt.core.compute import Compute
     from hnsdt.models.checkpoint import save_checkpoint
     from hnsdt.training import train_run
@@ -537,13 +545,14 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     (tmp_path / "drawn").mkdir()  # one hand-drawn map, of a size no training layout has
     (tmp_path / "drawn/corridor.txt").write_text((REPO / "layouts/drawn/corridor_5x13.txt").read_text())
     g["drawn"]["folder"] = str(tmp_path / "drawn")
-    dataset = gen.collect(validate(params), tmp_path / "ds", {}, progress=False)
+    dataset = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
     for method in g["methods"] + g["baselines"]:
-        (run,) = gen.plan_runs(validate(params), method, dataset)
+        (run,) = stages.plan_unseen(validate(params), method, dataset)
         model, facts, _ = train_run(run)
         assert type(model).__name__.startswith("View")
         save_checkpoint(model, tmp_path / "models" / method / "seed0", {"method": method, **facts})
-    table = gen.evaluate(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1), progress=False)
+    table = stages.evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1),
+                                   progress=False)
     assert set(table.method) == {"hnsdt", "gru", "dqn", "symbolic"}
     assert set(table.split) == {"train", "heldout", "minigrid", "drawn"}
     assert len(table) == 4 * 4 * 2 * 2
@@ -559,7 +568,7 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     goto = controllers[controllers.operator.str.startswith("GoTo") & (controllers.fail_prob == 0)]
     assert len(goto) and (goto.steps == goto.optimal_steps).all() and (goto.right_actions == goto.steps).all()
     with pytest.raises(ValueError, match="not in generalisation.methods"):
-        gen.plan_runs(validate(params), "options", dataset)
+        stages.plan_unseen(validate(params), "options", dataset)
 
 
 def test_a_bad_generalisation_knob_is_one_line_naming_it(tmp_path):
@@ -577,37 +586,35 @@ def test_a_bad_generalisation_knob_is_one_line_naming_it(tmp_path):
 
 
 def test_a_methods_budget_replaces_the_protocols_knobs_and_a_bad_one_is_named(tmp_path):
-    from hnsdt import generalisation as gen
     from hnsdt.core.config import ParamsError
 
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"]["budgets"] = {"gru": {"epochs": 3, "lr": 1}, "dqn": {"env_steps": 123}}
-    _, train_cfg = gen.network_configs(validate(params), "gru", 0)
+    _, train_cfg = network_configs(validate(params), "gru", 0)
     assert (train_cfg.epochs, train_cfg.lr) == (3, 1.0)
-    assert gen.network_configs(validate(params), "dqn", 1)[1].env_steps == 123
-    assert gen.network_configs(validate(params), "lstm_hier", 0)[1].epochs == params["baselines"]["lstm_hier"]["epochs"]
+    assert network_configs(validate(params), "dqn", 1)[1].env_steps == 123
+    assert network_configs(validate(params), "lstm_hier", 0)[1].epochs == params["baselines"]["lstm_hier"]["epochs"]
     params["generalisation"]["budgets"] = {"gru": {"epoch": 3}}
     with pytest.raises(ParamsError, match=r"generalisation.budgets.gru: unknown key epoch; expected one of"):
-        gen.network_configs(validate(params), "gru", 0)
+        network_configs(validate(params), "gru", 0)
     params["generalisation"]["budgets"] = {"gru": {"epochs": "3"}}
     with pytest.raises(ParamsError, match=r"generalisation.budgets.gru.epochs must be int, got '3'"):
-        gen.network_configs(validate(params), "gru", 0)
+        network_configs(validate(params), "gru", 0)
     params["baselines"]["dqn"]["env_steps"] = {"keydoor": 100}  # a budget per paper env, none for the mazes:
     params["generalisation"].update(family="keydoor_maze", budgets={"dqn": {"env_steps": 77}})  # the family's
-    assert gen.network_configs(validate(params), "dqn", 0)[1].env_steps == 77  # own budget stands in
+    assert network_configs(validate(params), "dqn", 0)[1].env_steps == 77  # own budget stands in
     params["generalisation"]["budgets"] = {}
     with pytest.raises(ParamsError, match=r"baselines.dqn.env_steps .* \(missing or bad for 'keydoor_maze'"):
-        gen.network_configs(validate(params), "dqn", 0)
+        network_configs(validate(params), "dqn", 0)
     params["generalisation"]["budgets"] = {"dqn": {"env_steps": "many"}}
     with pytest.raises(ParamsError, match=r"generalisation.budgets.dqn.env_steps must be a positive integer, got 'many'"):
-        gen.network_configs(validate(params), "dqn", 0)
+        network_configs(validate(params), "dqn", 0)
 
 
 def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operators(tmp_path):
     """`random_episodes_per_layout` adds random walks to the dataset; the paper's HNSDT trains on them with the
     paper's Move labels and is evaluated under the paper's planner (BFS over Move operators); without random
     walks its training stops with one line naming the knob."""
-    from hnsdt import generalisation as gen
     from hnsdt.core.compute import Compute
     from hnsdt.models.checkpoint import save_checkpoint
     from hnsdt.symbolic.subgoals import NAME_TO_ID
@@ -616,20 +623,21 @@ def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operator
     params = _tiny_generalisation_params(tmp_path)
     g = params["generalisation"]
     g.update(methods=["hnsdt_paper"], baselines=[])
-    planner_only = gen.collect(validate(params), tmp_path / "planner", {}, progress=False)
+    planner_only = stages.collect_unseen(validate(params), tmp_path / "planner", progress=False, provenance={})
     no_walks = r"hnsdt_paper learns from \['random'\] episodes and .*generalisation\.random_episodes_per_layout"
     with pytest.raises(ValueError, match=no_walks):
-        gen.plan_runs(validate(params), "hnsdt_paper", planner_only)
+        stages.plan_unseen(validate(params), "hnsdt_paper", planner_only)
     g["random_episodes_per_layout"] = 2
-    dataset = gen.collect(validate(params), tmp_path / "ds", {}, progress=False)
-    (run,) = gen.plan_runs(validate(params), "hnsdt_paper", dataset)
+    dataset = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    (run,) = stages.plan_unseen(validate(params), "hnsdt_paper", dataset)
     frames = run.data
     walks = frames.policy == "random"
     assert walks.sum() > 0 and (~walks).sum() > 0
     assert NAME_TO_ID["Move"] in set(frames.subgoals[walks].tolist())  # the paper's labels, not GoTo
     model, facts, _ = train_run(run)
     save_checkpoint(model, tmp_path / "models/hnsdt_paper/seed0", {"method": "hnsdt_paper", **facts})
-    table = gen.evaluate(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1), progress=False)
+    table = stages.evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1),
+                                   progress=False)
     assert set(table.method) == {"hnsdt_paper", "symbolic"}
     assert set(table.split) == {"train", "heldout", "minigrid", "drawn"}
 
@@ -682,15 +690,14 @@ def test_no_network_depends_on_the_maps_it_is_evaluated_on(tmp_path):
     same network and training configs; targets further than ``max_offset`` are clamped, direction kept."""
     import torch
 
-    from hnsdt import generalisation as gen
     from hnsdt.models.view import ViewDecisionTransformer
 
     params = _tiny_generalisation_params(tmp_path)
-    before = {m: gen.network_configs(validate(params), m, 0) for m in ("hnsdt", "pure_dt", "gru")}
+    before = {m: network_configs(validate(params), m, 0) for m in ("hnsdt", "pure_dt", "gru")}
     params["generalisation"].update(
         heldout_layouts=3, drawn=None,
         minigrid=[{"id": "MiniGrid-DoorKey-16x16-v0", "layouts": 1, "max_steps": 250}])
-    after = {m: gen.network_configs(validate(params), m, 0) for m in ("hnsdt", "pure_dt", "gru")}
+    after = {m: network_configs(validate(params), m, 0) for m in ("hnsdt", "pure_dt", "gru")}
     assert before == after
     cfg, _ = before["hnsdt"]
     assert cfg.max_offset == params["generalisation"]["max_offset"]
@@ -709,18 +716,18 @@ def test_the_dts_budget_is_chosen_on_the_validation_layouts(tmp_path):
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"].update(methods=["hnsdt"], baselines=["gru"], validation_layouts=2)
     params["train"]["validation"]["hnsdt"].update(starts=12, max_epochs=4)
-    dataset = gen.collect(validate(params), tmp_path / "ds", {}, progress=False)
-    (run,) = gen.plan_runs(validate(params), "hnsdt", dataset)
+    dataset = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    (run,) = stages.plan_unseen(validate(params), "hnsdt", dataset)
     validation = gen.validation_layouts(validate(params))
     assert run.train_cfg.validation == 0.0 and run.train_cfg.epochs == 4
     assert [c.layout for c in run.measure.courses] == [s.layout for s in validation]
     assert len(validation) == 2 * len(params["generalisation"]["validation_families"]) == 6  # 2 of each family
     for course, src in zip(run.measure.courses, validation):  # the 12 starts spread: the start and a random one
         assert len(course.starts) == 2 and (course.starts[0, :2] == src.layout.start).all()
-    (baseline,) = gen.plan_runs(validate(params), "gru", dataset)
+    (baseline,) = stages.plan_unseen(validate(params), "gru", dataset)
     assert baseline.measure is None
     params["generalisation"]["validation_layouts"] = 0  # the paper protocol's budget
-    (run,) = gen.plan_runs(validate(params), "hnsdt", dataset)
+    (run,) = stages.plan_unseen(validate(params), "hnsdt", dataset)
     assert run.measure is None and run.train_cfg.validation == params["train"]["validation"]["hnsdt"]["share"]
 
 

@@ -89,31 +89,60 @@ def report(params: Params, results: Path, out: Path, generalisation: Path | None
     return path
 
 
-def collect_unseen(params: Params, out: Path, progress: bool = True) -> Path:
-    """Stage `collect_generalisation`: one dataset with views over the generated training layouts."""
+def collect_unseen(params: Params, out: Path, progress: bool = True, provenance: dict | None = None) -> Path:
+    """Stage `collect_generalisation`: noisy-planner episodes on every training layout of the unseen-layout
+    experiment, one LeRobot dataset with local views at ``out``."""
     from hnsdt import generalisation as gen
+    from hnsdt.core.config import layout_collect_config
+    from hnsdt.data.collect import collect_on_layouts
 
-    root = gen.collect(params, out, _provenance(params), progress=progress)
+    g, cfg = params.need("generalisation"), layout_collect_config(params)
+    train = gen.training_layouts(params)
+    gen.check_sources(train, max(cfg.fail_probs))
+    root = collect_on_layouts(cfg, [s.layout for s in train], out, f"local/generated-{g.family}", g.view_radius,
+                              g.family, progress, _provenance(params) if provenance is None else provenance)
     print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
     return root
+
+
+def plan_unseen(params: Params, method: str, dataset: Path) -> list:
+    """One :class:`hnsdt.training.TrainTask` per seed of ``method``'s view network: offline on the ``dataset``
+    of the training layouts, online on the layouts; budgets chosen on the validation layouts."""
+    from hnsdt import generalisation as gen
+    from hnsdt.training import plan_layout_runs
+
+    return plan_layout_runs(params, method, dataset, [s.layout for s in gen.training_layouts(params)],
+                            lambda: [s.layout for s in gen.validation_layouts(params)])
 
 
 def train_unseen(params: Params, method: str, dataset: Path, out: Path, curves: Path, compute=None,
                  progress: bool = True) -> None:
     """Stages `train_generalisation`, `train_generalisation_baselines`: one method on views, every seed."""
-    from hnsdt import generalisation as gen
     from hnsdt.training import train_all
 
-    runs = gen.plan_runs(params, method, dataset)
-    train_all(runs, gen.settings(params).family, out, curves, compute or compute_settings(params), progress=progress)
+    runs = plan_unseen(params, method, dataset)
+    train_all(runs, params.need("generalisation").family, out, curves, compute or compute_settings(params),
+              progress=progress)
     print(f"wrote {', '.join(f'seed{r.seed}' for r in runs)} -> {out}/ (curves: {curves}/)")
 
 
 def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progress: bool = True):
-    """Stage `evaluate_generalisation`: every method × seed on the training, held-out and MiniGrid layouts."""
+    """Stage `evaluate_generalisation`: every method × seed on every evaluated layout (training, held-out,
+    MiniGrid, drawn), the symbolic baseline as the reference, beside the exact optimum."""
     from hnsdt import generalisation as gen
+    from hnsdt.core.config import eval_epsilon, method_executor
+    from hnsdt.core.methods import REFERENCE
+    from hnsdt.evaluation.evaluate import evaluate_layouts
 
-    table = gen.evaluate(params, models, out, compute or compute_settings(params), progress=progress)
+    g = params.need("generalisation")
+    fps = tuple(float(f) for f in params.need("evaluate").fail_probs)
+    sources = tuple(gen.layout_splits(params, evaluated_only=True))
+    gen.check_sources(sources, max(fps))
+    methods = [*g.learned, REFERENCE]
+    table = evaluate_layouts(methods, list(g.seeds), sources, fps, g.episodes,
+                             {m: method_executor(params, m) for m in methods},  # (the paper's arm plans over Move)
+                             {m: eval_epsilon(params, m) for m in g.learned}, models, out,
+                             compute or compute_settings(params), progress)
     print(f"wrote {out}/episodes.csv ({len(table)} episodes), summary.csv, segments.csv, layouts.csv")
     return table
 

@@ -48,16 +48,20 @@ def checkpoint_dir(models_root: str | Path, env: str, method: str, seed: int) ->
     return Path(models_root) / env / method / f"seed{seed}"
 
 
-def load_model(models_root: str | Path, env: str, method: str, seed: int, device: str = "cpu"):
-    """``(model, checkpoint meta)`` of a learned method's seed; ``(None, {})`` for the symbolic one."""
-    if lookup_method(method).training == "none":
+def load_model(path: str | Path, method: str, device: str = "cpu", view: bool = False):
+    """``(model, checkpoint meta)`` of a learned method's checkpoint folder ``path``; ``(None, {})`` for a method
+    that does not learn. ``view``: the checkpoint must hold the method's view network (unseen layouts)."""
+    entry = lookup_method(method)
+    if entry.training == "none":
         return None, {}
     from hnsdt.models.checkpoint import load_checkpoint
 
-    path = checkpoint_dir(models_root, env, method, seed)
     model, meta = load_checkpoint(path, device)
     if meta.get("method", method) != method:
         raise ValueError(f"{path} holds a {meta['method']} model")
+    if view and meta.get("arch") != resolve(entry.view_network).arch:
+        raise ValueError(f"{path} is not a view model (train it with `python pipeline/generalisation.py train "
+                         f"--method {method}`)")
     return model, meta
 
 
@@ -335,7 +339,7 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
     groups = [(m, e, s) for m in settings.methods for e in settings.envs for s in settings.seeds]
     tasks, params_count, usage = [], {}, []
     for method, env, seed in groups:
-        model, meta = load_model(models_root, env, method, seed, settings.device)
+        model, meta = load_model(checkpoint_dir(models_root, env, method, seed), method, settings.device)
         if model is not None:
             params_count[f"{env}/{method}"] = sum(p.numel() for p in model.parameters())
             usage.append(training_usage(models_root, env, method, seed))
@@ -437,21 +441,11 @@ def evaluate_layouts(methods: list[str], seeds: list[int], sources: tuple, fail_
     ``segments.csv`` and ``layouts.csv`` under ``out_dir``, with the exact optimum per layout and fail_prob."""
     from hnsdt.core.compute import Compute, run_tasks
     from hnsdt.core.fileio import atomic_dir
-    from hnsdt.models.checkpoint import load_checkpoint
 
-    tasks = []
-    for method in methods:
-        for seed in seeds:
-            model, meta = None, {}
-            entry = lookup_method(method)
-            if entry.training != "none":
-                path = Path(models_root) / method / f"seed{seed}"
-                model, meta = load_checkpoint(path)
-                if meta.get("arch") != resolve(entry.view_network).arch:
-                    raise ValueError(f"{path} is not a view model (train it with `python pipeline/generalisation.py "
-                                     f"train --method {method}`)")
-            tasks.append(EvalTask(method, seed, executors[method], model, meta, epsilons.get(method, 0.0),
-                                  layout_batches(seed, sources, fail_probs, episodes), layout_rows))
+    tasks = [EvalTask(method, seed, executors[method], *load_model(Path(models_root) / method / f"seed{seed}", method,
+                                                                   view=True),
+                      epsilons.get(method, 0.0), layout_batches(seed, sources, fail_probs, episodes), layout_rows)
+             for method in methods for seed in seeds]
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
     table = pd.DataFrame([row for batches in results for rows, _ in batches for row in rows])
     segments = pd.DataFrame([row for batches in results for _, rows in batches for row in rows])
