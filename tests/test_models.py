@@ -206,6 +206,23 @@ def test_cached_steps_compute_what_the_whole_episode_pass_computes(condition):
     assert torch.allclose(got, full, atol=1e-5)
 
 
+@pytest.mark.parametrize("T", [1, 4, 7, 8, 23, 24])
+def test_banded_attention_block_by_block_is_the_band_masked_attention(T):
+    """Attention cut into blocks of h (each block's queries against its own and the previous block's keys)
+    gives the whole-sequence attention under the band mask — for episodes shorter than, equal to, and not a
+    multiple of h — and so does one encoder layer built on it."""
+    from hnsdt.models.dt import band_mask, banded_attention, banded_layer
+
+    g = torch.Generator().manual_seed(T)
+    q, k, v = (torch.randn(2, 4, T, 8, generator=g) for _ in range(3))
+    full = torch.nn.functional.scaled_dot_product_attention(q, k, v, attn_mask=band_mask(T, 8))
+    assert torch.allclose(banded_attention(q, k, v, 8), full, atol=1e-6)
+    layer = DecisionTransformer(_cfg("none", formulation="episode", context=8)).blocks.layers[0].eval()
+    x = torch.randn(2, T, layer.linear1.in_features, generator=g)
+    with torch.no_grad():
+        assert torch.allclose(banded_layer(layer, x, 8), layer(x, src_mask=band_mask(T, 8)), atol=1e-5)
+
+
 def test_episode_attention_reaches_back_context_steps_per_layer():
     """With one layer, step t reads steps t - h + 1 .. t: a change h steps back is invisible, h - 1 back is not."""
     cfg = _cfg("return", formulation="episode", n_layers=1)

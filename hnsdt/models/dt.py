@@ -24,8 +24,9 @@ Two formulations (``formulation``) of what one training example and one decision
 * ``"window"`` (the paper's, Appendix C): an example is a window of the last h steps ending at a frame, cut
   anew for every frame, so a step is recomputed in up to h windows; each decision recomputes the whole window.
   The sub-goal token leads the window and conditions every step in it.
-* ``"episode"``: an example is a whole episode, attention limited to the last h steps by a banded causal mask
-  (sliding-window attention), so every step's prediction comes out of one pass and each step is computed once;
+* ``"episode"``: an example is a whole episode, attention limited to the last h steps (sliding-window
+  attention, computed block by block: :func:`banded_attention`), so every step's prediction comes out of one
+  pass and each step is computed once;
   at inference a key/value cache of the last h steps makes a decision one new token
   (:meth:`DecisionTransformer.step`). Each step token carries its own conditioning (its sub-goal and target,
   or its return-to-go) instead of one leading token; a step sees h steps back per layer, so through L layers
@@ -166,8 +167,9 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         subgoal_ids (B, T), subgoal_targets (B, T, 2), returns (B, T): each step's own."""
         prev = torch.full_like(actions, NO_ACTION)
         prev[:, 1:] = actions[:, :-1]
-        x = self.step_tokens(states, prev, timesteps, subgoal_ids, subgoal_targets, returns)
-        x = self.blocks(self.drop(x), mask=band_mask(x.shape[1], self.cfg.context, x.device))
+        x = self.drop(self.step_tokens(states, prev, timesteps, subgoal_ids, subgoal_targets, returns))
+        for layer in self.blocks.layers:
+            x = banded_layer(layer, x, self.cfg.context)
         return self.head(self.norm(x))
 
     def start(self, n: int) -> "StepCache":
@@ -245,6 +247,46 @@ def band_mask(n: int, context: int, device=None) -> torch.Tensor:
     i = torch.arange(n, device=device)
     d = i[:, None] - i[None, :]
     return torch.zeros(n, n, device=device).masked_fill((d < 0) | (d >= context), float("-inf"))
+
+
+def _block_mask(blocks: int, context: int, device) -> torch.Tensor:
+    """(blocks, h, 2h) additive mask of :func:`banded_attention`: query a of a block attends to keys a + 1 …
+    a + h of its previous block and itself (the last h steps up to its own); block 0 has no previous block."""
+    a, b = torch.arange(context, device=device)[:, None], torch.arange(2 * context, device=device)[None, :]
+    mask = torch.zeros(blocks, context, 2 * context, device=device).masked_fill((b <= a) | (b > a + context),
+                                                                                 float("-inf"))
+    mask[0, :, :context] = float("-inf")
+    return mask
+
+
+def banded_attention(q, k, v, context: int, dropout_p: float = 0.0) -> torch.Tensor:
+    """Causal attention to the last ``context`` steps of (B, heads, T, d) queries, keys and values, computed
+    block by block: the steps are cut into blocks of h, and each block's queries attend to the keys of that
+    block and the one before (2h keys, masked to each query's own h) — 2h·T scores instead of the T² that
+    :func:`band_mask` over the whole episode computes and mostly masks away. The same numbers up to rounding
+    (tested)."""
+    B, H, T, d = q.shape
+    blocks = -(-T // context)
+    if blocks * context != T:  # right-pad to whole blocks: the pad comes after every real step, never read
+        q, k, v = (F.pad(t, (0, 0, 0, blocks * context - T)) for t in (q, k, v))
+    q, k, v = (t.view(B, H, blocks, context, d) for t in (q, k, v))
+    k, v = (torch.cat([F.pad(t[:, :, :-1], (0, 0, 0, 0, 1, 0)), t], dim=3) for t in (k, v))  # (previous, own)
+    out = F.scaled_dot_product_attention(q, k, v, attn_mask=_block_mask(blocks, context, q.device),
+                                         dropout_p=dropout_p)
+    return out.reshape(B, H, blocks * context, d)[:, :, :T]
+
+
+def banded_layer(layer: nn.TransformerEncoderLayer, x, context: int) -> torch.Tensor:
+    """One pre-norm encoder layer on whole (B, T, d) episodes, attention limited to the last ``context`` steps
+    (:func:`banded_attention`); dropout where ``layer`` applies it, in training mode."""
+    attn = layer.self_attn
+    B, T, d = x.shape
+    heads = attn.num_heads
+    q, k, v = F.linear(layer.norm1(x), attn.in_proj_weight, attn.in_proj_bias).view(
+        B, T, 3, heads, d // heads).permute(2, 0, 3, 1, 4)
+    out = banded_attention(q, k, v, context, attn.dropout if layer.training else 0.0)
+    x = x + layer.dropout1(attn.out_proj(out.transpose(1, 2).reshape(B, T, d)))
+    return x + layer.dropout2(layer.linear2(layer.dropout(layer.activation(layer.linear1(layer.norm2(x))))))
 
 
 class StepCache:
