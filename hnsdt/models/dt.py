@@ -40,6 +40,7 @@ actions; training minimises its negative log-likelihood.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from functools import lru_cache
 
 import torch
 import torch.nn as nn
@@ -249,6 +250,7 @@ def band_mask(n: int, context: int, device=None) -> torch.Tensor:
     return torch.zeros(n, n, device=device).masked_fill((d < 0) | (d >= context), float("-inf"))
 
 
+@lru_cache(maxsize=64)  # built once per episode length, not per layer and batch; SDPA only reads it
 def _block_mask(blocks: int, context: int, device) -> torch.Tensor:
     """(blocks, h, 2h) additive mask of :func:`banded_attention`: query a of a block attends to keys a + 1 …
     a + h of its previous block and itself (the last h steps up to its own); block 0 has no previous block."""
@@ -279,13 +281,22 @@ def banded_attention(q, k, v, context: int, dropout_p: float = 0.0) -> torch.Ten
 def banded_layer(layer: nn.TransformerEncoderLayer, x, context: int) -> torch.Tensor:
     """One pre-norm encoder layer on whole (B, T, d) episodes, attention limited to the last ``context`` steps
     (:func:`banded_attention`); dropout where ``layer`` applies it, in training mode."""
-    attn = layer.self_attn
     B, T, d = x.shape
-    heads = attn.num_heads
-    q, k, v = F.linear(layer.norm1(x), attn.in_proj_weight, attn.in_proj_bias).view(
-        B, T, 3, heads, d // heads).permute(2, 0, 3, 1, 4)
-    out = banded_attention(q, k, v, context, attn.dropout if layer.training else 0.0)
-    x = x + layer.dropout1(attn.out_proj(out.transpose(1, 2).reshape(B, T, d)))
+    q, k, v = _qkv(layer, x).permute(2, 0, 3, 1, 4)  # (B, heads, T, d / heads) each
+    out = banded_attention(q, k, v, context, layer.self_attn.dropout if layer.training else 0.0)
+    return _feed_forward(layer, x + layer.dropout1(layer.self_attn.out_proj(out.transpose(1, 2).reshape(B, T, d))))
+
+
+def _qkv(layer: nn.TransformerEncoderLayer, x) -> torch.Tensor:
+    """The pre-norm layer's queries, keys and values of ``x`` (…, d), as (…, 3, heads, d / heads)."""
+    attn = layer.self_attn
+    d = x.shape[-1]
+    return F.linear(layer.norm1(x), attn.in_proj_weight, attn.in_proj_bias).unflatten(-1, (3, attn.num_heads,
+                                                                                          d // attn.num_heads))
+
+
+def _feed_forward(layer: nn.TransformerEncoderLayer, x) -> torch.Tensor:
+    """The pre-norm layer's second half, residual included (its dropouts act in training mode only)."""
     return x + layer.dropout2(layer.linear2(layer.dropout(layer.activation(layer.linear1(layer.norm2(x))))))
 
 
@@ -314,13 +325,10 @@ def cached_layer(layer: nn.TransformerEncoderLayer, x, keys, values, rows, slot,
     """One pre-norm encoder layer (eval mode) on one new token per row, its key and value written into the
     cache: the same computation as ``layer`` on the whole sequence under :func:`band_mask`. ``rows``: the
     cache rows of ``x``, sorted and distinct; ``mask``: additive, (n, 1, 1, h)."""
-    attn = layer.self_attn
     n, d = x.shape
-    heads = attn.num_heads
-    q, k, v = F.linear(layer.norm1(x), attn.in_proj_weight, attn.in_proj_bias).view(n, 3, heads, d // heads).unbind(1)
+    q, k, v = _qkv(layer, x).unbind(1)  # (n, heads, d / heads) each
     keys[rows, :, slot], values[rows, :, slot] = k, v
     if n < len(keys):  # some episodes are done: gather the live ones (all of them: the cache as it is)
         keys, values = keys[rows], values[rows]
     out = F.scaled_dot_product_attention(q[:, :, None], keys, values, attn_mask=mask)
-    x = x + attn.out_proj(out.reshape(n, d))
-    return x + layer.linear2(layer.activation(layer.linear1(layer.norm2(x))))
+    return _feed_forward(layer, x + layer.self_attn.out_proj(out.reshape(n, d)))
