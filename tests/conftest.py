@@ -11,10 +11,16 @@ os.environ["HF_HUB_OFFLINE"] = "1"
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 # The CPU kernels and thread count the pipeline pins (hnsdt/core/reproducible.py), so learned models and the tests'
-# thresholds come out the same on any machine; subprocesses inherit them.
-from hnsdt.core.reproducible import pin_environment  # noqa: E402
+# thresholds come out the same on any machine; subprocesses inherit them. Set before NumPy loads (its OpenBLAS
+# reads its core type then), and importing the hnsdt package loads NumPy: the module is read from its file.
+import importlib.util  # noqa: E402
 
-pin_environment()
+_spec = importlib.util.spec_from_file_location(
+    "_hnsdt_reproducible", os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                        "hnsdt", "core", "reproducible.py"))
+_reproducible = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(_reproducible)
+_reproducible.pin_environment()
 # One torch thread per test process, as the pipeline's runs use (compute.threads: 1): pytest-xdist runs one
 # test process per core instead. Idle OpenMP threads of the subprocesses sleep rather than spin, so processes
 # sharing the cores do not slow each other down (results do not depend on either setting's waiting policy).

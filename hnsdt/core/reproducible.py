@@ -11,6 +11,10 @@ these alone changes the trained bytes, so each is pinned for every process of th
   and ISA; per Intel's documentation only ``COMPATIBLE`` (SSE2 without approximate reciprocals) gives the
   same results on Intel and AMD processors alike (``AVX2`` is silently ignored on AMD);
 * ``DNNL_MAX_CPU_ISA=AVX2`` — oneDNN's JIT kernels (used by torch for some matmuls) likewise;
+* ``OPENBLAS_CORETYPE=Haswell``, ``OPENBLAS_NUM_THREADS=1`` — NumPy's OpenBLAS, which computes the decision
+  transformers' linear layers (:mod:`hnsdt.models.kernels`: 3.6× faster than MKL's ``COMPATIBLE`` code), picks
+  its kernels by core type: pinned to its AVX2/FMA kernels, which every machine of this project has, and to one
+  thread (a pool's workers run one torch thread each anyway);
 * ``OMP_NUM_THREADS=2`` — parallel reductions split work by thread count: the machines of this project have 2
   cores, so 2 threads is also torch's default here;
 * ``PYTHONHASHSEED=0`` — lerobot orders task lists through Python sets, whose order follows the string hash.
@@ -29,6 +33,8 @@ PINNED_CPU = {
     "ATEN_CPU_CAPABILITY": "avx2",
     "MKL_CBWR": "COMPATIBLE",
     "DNNL_MAX_CPU_ISA": "AVX2",
+    "OPENBLAS_CORETYPE": "Haswell",
+    "OPENBLAS_NUM_THREADS": "1",
     "OMP_NUM_THREADS": "2",
 }
 
@@ -42,10 +48,10 @@ def pinned_environment() -> dict[str, str]:
 
 
 def pin_environment() -> None:
-    """Set the pinned variables in ``os.environ`` of a process that has not imported torch yet (the tests);
-    the hash seed only takes effect in child processes."""
-    if "torch" in sys.modules:
-        raise RuntimeError("pin_environment() must run before torch is imported")
+    """Set the pinned variables in ``os.environ`` of a process that has not imported numpy or torch yet (the
+    tests); the hash seed only takes effect in child processes."""
+    if "torch" in sys.modules or "numpy" in sys.modules:
+        raise RuntimeError("pin_environment() must run before numpy and torch are imported")
     os.environ.update(pinned_environment())
 
 

@@ -47,6 +47,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from hnsdt.envs.dynamics import N_ACTIONS  # the world's actions (the Actions enum), the head's outputs
+from hnsdt.models.kernels import linear
 from hnsdt.models.network import Network
 from hnsdt.models.windows import FORMULATIONS
 from hnsdt.symbolic.subgoals import VOCAB_SIZE
@@ -171,7 +172,7 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         x = self.drop(self.step_tokens(states, prev, timesteps, subgoal_ids, subgoal_targets, returns))
         for layer in self.blocks.layers:
             x = banded_layer(layer, x, self.cfg.context)
-        return self.head(self.norm(x))
+        return _head(self, x)
 
     def start(self, n: int) -> "StepCache":
         """An empty key/value cache for ``n`` episodes (episode formulation, eval mode)."""
@@ -188,7 +189,7 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         mask = torch.zeros(valid.shape, device=x.device).masked_fill(~valid, float("-inf"))[:, None, None, :]
         for i, layer in enumerate(self.blocks.layers):
             x = cached_layer(layer, x, cache.keys[i], cache.values[i], rows, slot, mask)
-        return self.head(self.norm(x))
+        return _head(self, x)
 
     def forward(self, states, actions, timesteps, pad, subgoal_ids=None, subgoal_targets=None, returns=None):
         """Action logits (B, h, 5), one per state of the window (episode formulation: per step of the episode,
@@ -284,20 +285,32 @@ def banded_layer(layer: nn.TransformerEncoderLayer, x, context: int) -> torch.Te
     B, T, d = x.shape
     q, k, v = _qkv(layer, x).permute(2, 0, 3, 1, 4)  # (B, heads, T, d / heads) each
     out = banded_attention(q, k, v, context, layer.self_attn.dropout if layer.training else 0.0)
-    return _feed_forward(layer, x + layer.dropout1(layer.self_attn.out_proj(out.transpose(1, 2).reshape(B, T, d))))
+    out = _apply(layer.self_attn.out_proj, out.transpose(1, 2).reshape(B, T, d))
+    return _feed_forward(layer, x + layer.dropout1(out))
 
 
 def _qkv(layer: nn.TransformerEncoderLayer, x) -> torch.Tensor:
     """The pre-norm layer's queries, keys and values of ``x`` (…, d), as (…, 3, heads, d / heads)."""
     attn = layer.self_attn
     d = x.shape[-1]
-    return F.linear(layer.norm1(x), attn.in_proj_weight, attn.in_proj_bias).unflatten(-1, (3, attn.num_heads,
+    return linear(layer.norm1(x), attn.in_proj_weight, attn.in_proj_bias).unflatten(-1, (3, attn.num_heads,
                                                                                           d // attn.num_heads))
 
 
 def _feed_forward(layer: nn.TransformerEncoderLayer, x) -> torch.Tensor:
     """The pre-norm layer's second half, residual included (its dropouts act in training mode only)."""
-    return x + layer.dropout2(layer.linear2(layer.dropout(layer.activation(layer.linear1(layer.norm2(x))))))
+    hidden = layer.dropout(layer.activation(_apply(layer.linear1, layer.norm2(x))))
+    return x + layer.dropout2(_apply(layer.linear2, hidden))
+
+
+def _apply(module: nn.Linear, x) -> torch.Tensor:
+    """``module(x)`` on the pinned BLAS kernel (:mod:`hnsdt.models.kernels`)."""
+    return linear(x, module.weight, module.bias)
+
+
+def _head(model: DecisionTransformer, x) -> torch.Tensor:
+    """The episode formulation's action logits of the last layer's tokens."""
+    return _apply(model.head, model.norm(x))
 
 
 class StepCache:
@@ -331,4 +344,4 @@ def cached_layer(layer: nn.TransformerEncoderLayer, x, keys, values, rows, slot,
     if n < len(keys):  # some episodes are done: gather the live ones (all of them: the cache as it is)
         keys, values = keys[rows], values[rows]
     out = F.scaled_dot_product_attention(q[:, :, None], keys, values, attn_mask=mask)
-    return _feed_forward(layer, x + layer.self_attn.out_proj(out.reshape(n, d)))
+    return _feed_forward(layer, x + _apply(layer.self_attn.out_proj, out.reshape(n, d)))

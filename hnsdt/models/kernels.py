@@ -1,0 +1,87 @@
+"""The decision transformer's matrix products on a BLAS kernel that is pinned by name, not by vendor.
+
+Why: a model's bytes depend on the GEMM kernel that computed it. torch's CPU GEMMs are MKL's, which dispatches by
+vendor and ISA, so the pipeline pins them to ``MKL_CBWR=COMPATIBLE`` (:mod:`hnsdt.core.reproducible`): SSE2
+code, measured 6.6× slower than MKL's native kernels on the Intel Xeon of this project (9 against 61 GMAC/s on a
+(100 × 128) · (128 × 512) product, one thread) — the decision transformers' training and acting spend most of
+their time there. NumPy's OpenBLAS picks its kernels by core type, and ``OPENBLAS_CORETYPE=Haswell`` (pinned
+beside MKL's setting) runs the same AVX2/FMA kernels with the same blocking on any x86-64 CPU that has AVX2,
+Intel or AMD: 34 GMAC/s on that product, 3.6× the pinned MKL (``benchmarks/cpu_determinism.py``).
+
+:func:`linear` is ``F.linear`` computed there, forward and backward (an autograd function), for CPU tensors;
+other devices keep torch's kernels. Same numbers up to rounding (tested); the bytes are OpenBLAS's.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import glob
+import os
+from functools import lru_cache
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+
+@lru_cache(maxsize=1)
+def blas_core() -> str:
+    """The core type whose kernels NumPy's OpenBLAS runs in this process (``OPENBLAS_CORETYPE``, read when NumPy
+    loads it), e.g. ``Haswell``; ``unknown`` for a NumPy built on another BLAS."""
+    libs = glob.glob(os.path.join(os.path.dirname(np.__file__), os.pardir, "numpy.libs", "libscipy_openblas*.so"))
+    for path in libs:
+        lib = ctypes.CDLL(path)  # the library NumPy already loaded (dlopen returns the same handle)
+        for name in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename"):
+            if hasattr(lib, name):
+                getattr(lib, name).restype = ctypes.c_char_p
+                return getattr(lib, name)().decode()
+    return "unknown"
+
+
+@lru_cache(maxsize=1)  # (once per process: it raises until it passes)
+def check_blas_core() -> None:
+    """Fail with one line where the pinned environment asks for a core type NumPy's OpenBLAS does not run (NumPy
+    was imported before the variable was set): its products would give other bytes."""
+    wanted = os.environ.get("OPENBLAS_CORETYPE")
+    if wanted and blas_core().lower() != wanted.lower():
+        raise RuntimeError(f"NumPy's OpenBLAS runs {blas_core()} kernels, not OPENBLAS_CORETYPE={wanted}: set the "
+                           "pinned environment (hnsdt.core.reproducible) before NumPy is imported")
+
+
+def _matrix(t: torch.Tensor) -> np.ndarray:
+    """(…, k) tensor -> (rows, k) C-contiguous array, sharing memory where it can."""
+    return t.detach().reshape(-1, t.shape[-1]).contiguous().numpy()
+
+
+def _forward(x, weight, bias) -> torch.Tensor:
+    y = _matrix(x) @ weight.detach().numpy().T
+    if bias is not None:
+        y += bias.detach().numpy()
+    return torch.from_numpy(y).reshape(*x.shape[:-1], weight.shape[0])
+
+
+class _Linear(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, x, weight, bias):
+        ctx.save_for_backward(x, weight)
+        ctx.has_bias = bias is not None
+        return _forward(x, weight, bias)
+
+    @staticmethod
+    def backward(ctx, grad):
+        x, weight = ctx.saved_tensors
+        g = _matrix(grad)
+        grad_x = torch.from_numpy(g @ weight.numpy()).reshape(x.shape) if ctx.needs_input_grad[0] else None
+        grad_w = torch.from_numpy(g.T @ _matrix(x)) if ctx.needs_input_grad[1] else None
+        grad_b = torch.from_numpy(g.sum(0)) if ctx.has_bias and ctx.needs_input_grad[2] else None
+        return grad_x, grad_w, grad_b
+
+
+def linear(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None = None) -> torch.Tensor:
+    """``F.linear(x, weight, bias)``, on OpenBLAS for CPU tensors (float32 or float64)."""
+    if x.device.type != "cpu":
+        return F.linear(x, weight, bias)
+    check_blas_core()
+    if torch.is_grad_enabled() and any(t is not None and t.requires_grad for t in (x, weight, bias)):
+        return _Linear.apply(x, weight, bias)
+    return _forward(x, weight, bias)  # (acting: no autograd node to build)
