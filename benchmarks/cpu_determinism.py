@@ -1,11 +1,12 @@
 """Which CPU settings change the bytes of a trained model, and what pinning them costs.
 
 Usage: python benchmarks/cpu_determinism.py
-Each configuration runs in a fresh process: a decision transformer (L3, d128, context 10, batch 128) trained
-30 steps on a fixed random batch stream, and option-critic trained 6,000 env steps on Case 1. It prints the
-hash of each model's weights and the time per step. A row whose hash differs from the first row's shows a
-setting that a different machine (another ISA, another vendor's MKL path, another core count) would change;
-the last row is what ``hnsdt/core/reproducible.py`` pins.
+Each configuration runs in a fresh process: a decision transformer (L3, d128, context 10, the episode
+formulation the pipeline trains: 32 episodes of 40 steps a batch) trained 30 steps on a fixed random batch
+stream, and option-critic trained 6,000 env steps on Case 1. It prints the hash of each model's weights and the
+time per step. A row whose hash differs from the first row's shows a setting that a different machine (another
+ISA, another vendor's MKL path, another BLAS core type, another core count) would change; the last rows are what
+``hnsdt/core/reproducible.py`` pins.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import os
 import subprocess
 import sys
 
-from hnsdt.core.reproducible import PINNED_CPU
+from hnsdt.core.reproducible import ALWAYS, PINNED_CPU
 
 CHILD = r"""
 import hashlib, time
@@ -34,16 +35,16 @@ def digest(model):
 
 torch.manual_seed(0)
 g = np.random.default_rng(0)
-dt = DecisionTransformer(DTConfig("subgoal", 1, 5, 5, context=10, n_layers=3))
+dt = DecisionTransformer(DTConfig("subgoal", 1, 5, 5, context=10, n_layers=3, formulation="episode"))
 opt = torch.optim.Adam(dt.parameters(), 1e-3)
-B, T, steps = 128, 10, 30
+B, T, steps = 32, 40, 30
 t = time.perf_counter()
 for _ in range(steps):
     st = np.stack([g.integers(0, 5, (B, T)), g.integers(0, 5, (B, T)), g.integers(0, 2, (B, T))], -1)
     batch = dict(states=torch.from_numpy(st), actions=torch.from_numpy(g.integers(0, 5, (B, T))),
-                 timesteps=torch.from_numpy(g.integers(0, 50, (B, T))), pad=torch.zeros(B, T, dtype=torch.bool),
-                 subgoal_ids=torch.from_numpy(g.integers(0, 3, B)),
-                 subgoal_targets=torch.from_numpy(g.integers(-1, 5, (B, 2))),
+                 timesteps=torch.from_numpy(np.tile(np.arange(T), (B, 1))),
+                 subgoal_ids=torch.from_numpy(g.integers(0, 3, (B, T))),
+                 subgoal_targets=torch.from_numpy(g.integers(-1, 5, (B, T, 2))),
                  loss_mask=torch.ones(B, T, dtype=torch.bool))
     loss = dt.loss(batch)
     opt.zero_grad()
@@ -65,6 +66,7 @@ CONFIGS = [
     ("DNNL_MAX_CPU_ISA=AVX2", {"DNNL_MAX_CPU_ISA": "AVX2"}),
     ("MKL_CBWR=AUTO (MKL's reproducible mode, ISA still chosen per CPU)", {"MKL_CBWR": "AUTO"}),
     ("MKL_CBWR=COMPATIBLE", {"MKL_CBWR": "COMPATIBLE"}),
+    ("OPENBLAS_CORETYPE=Haswell (NumPy's BLAS: the DT's linear layers)", {"OPENBLAS_CORETYPE": "Haswell"}),
     ("OMP_NUM_THREADS=1", {"OMP_NUM_THREADS": "1"}),
     ("pinned (hnsdt/core/reproducible.py)", PINNED_CPU),
     ("pinned, second process", PINNED_CPU),
@@ -74,7 +76,7 @@ CONFIGS = [
 def main() -> int:
     argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()  # --help, and nothing else
     base = {k: v for k, v in os.environ.items() if k not in PINNED_CPU}
-    base["PYTHONHASHSEED"] = "0"
+    base.update(ALWAYS)
     print(f"{'configuration':<68} {'ISA':<7} {'th':>2}  {'DT weights':<12} {'DT step':>14}  "
           f"{'OC weights':<12} {'OC 6k':>7}")
     for name, extra in CONFIGS:

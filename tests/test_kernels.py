@@ -61,3 +61,12 @@ def test_a_core_type_set_after_numpy_loaded_is_one_clear_error():
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
     assert out.returncode != 0
     assert "not OPENBLAS_CORETYPE=Sandybridge" in out.stderr.strip().splitlines()[-1]
+
+
+def test_native_mode_drops_the_kernel_pins_but_keeps_one_blas_thread(monkeypatch):
+    from hnsdt.core.reproducible import ALWAYS, PINNED_CPU, pinned_environment
+
+    monkeypatch.setenv("HNSDT_CPU", "native")
+    assert pinned_environment() == ALWAYS and ALWAYS["OPENBLAS_NUM_THREADS"] == "1"
+    monkeypatch.delenv("HNSDT_CPU")
+    assert pinned_environment() == ALWAYS | PINNED_CPU and PINNED_CPU["OPENBLAS_CORETYPE"] == "Haswell"

@@ -1,5 +1,7 @@
-"""Same seed, same bytes — on one machine, and across the x86-64 machines measured (an AMD EPYC and a machine
-without AVX-512; an Intel Xeon with AVX-512-FP16 still gave other model bytes: docs/reproducibility.md).
+"""Same seed, same bytes — on one machine, and across the x86-64 machines measured before the decision
+transformers' linear layers moved to OpenBLAS (an AMD EPYC and a machine without AVX-512; an Intel Xeon with
+AVX-512-FP16 still gave other model bytes; the OpenBLAS kernels are not yet measured across CPUs:
+docs/reproducibility.md).
 
 Seeding fixes the random streams; the numerics still depend on which kernels the CPU runs. Measured with
 ``benchmarks/cpu_determinism.py`` (a DT and an option-critic trained for a few steps, weights hashed), each of
@@ -11,17 +13,18 @@ these alone changes the trained bytes, so each is pinned for every process of th
   and ISA; per Intel's documentation only ``COMPATIBLE`` (SSE2 without approximate reciprocals) gives the
   same results on Intel and AMD processors alike (``AVX2`` is silently ignored on AMD);
 * ``DNNL_MAX_CPU_ISA=AVX2`` — oneDNN's JIT kernels (used by torch for some matmuls) likewise;
-* ``OPENBLAS_CORETYPE=Haswell``, ``OPENBLAS_NUM_THREADS=1`` — NumPy's OpenBLAS, which computes the decision
-  transformers' linear layers (:mod:`hnsdt.models.kernels`: 3.6× faster than MKL's ``COMPATIBLE`` code), picks
-  its kernels by core type: pinned to its AVX2/FMA kernels, which every machine of this project has, and to one
-  thread (a pool's workers run one torch thread each anyway);
+* ``OPENBLAS_CORETYPE=Haswell`` — NumPy's OpenBLAS, which computes the decision transformers' linear layers
+  (:mod:`hnsdt.models.kernels`: 3.6× faster than MKL's ``COMPATIBLE`` code), picks its kernels by core type,
+  not vendor: pinned to its AVX2/FMA kernels, which every machine of this project has (on one thread, always:
+  :data:`ALWAYS`);
 * ``OMP_NUM_THREADS=2`` — parallel reductions split work by thread count: the machines of this project have 2
   cores, so 2 threads is also torch's default here;
 * ``PYTHONHASHSEED=0`` — lerobot orders task lists through Python sets, whose order follows the string hash.
 
-The price, measured on a 2-core AMD EPYC (``benchmarks/cpu_determinism.py``): decision-transformer training
-steps are about 1.6× slower, option-critic training about 1.25×. ``HNSDT_CPU=native`` skips the pinning
-(hash seed excepted) for speed, at the cost of results that depend on the CPU that made them.
+The price, measured on a 2-core Intel Xeon (``benchmarks/cpu_determinism.py``): decision-transformer training
+steps about 1.15× slower (about 3× while their linear layers ran on MKL's ``COMPATIBLE`` code), option-critic
+training about 1.1×. ``HNSDT_CPU=native`` skips the pinning (:data:`ALWAYS` excepted) for speed, at the cost of
+results that depend on the CPU that made them.
 """
 
 from __future__ import annotations
@@ -29,19 +32,22 @@ from __future__ import annotations
 import os
 import sys
 
+# Set whatever the kernels: lerobot's set order, and one BLAS thread (OpenBLAS's own thread pool beside torch's
+# threads only contends for the same cores: benchmarks/cpu_determinism.py, docs/reproducibility.md).
+ALWAYS = {"PYTHONHASHSEED": "0", "OPENBLAS_NUM_THREADS": "1"}
+
 PINNED_CPU = {
     "ATEN_CPU_CAPABILITY": "avx2",
     "MKL_CBWR": "COMPATIBLE",
     "DNNL_MAX_CPU_ISA": "AVX2",
     "OPENBLAS_CORETYPE": "Haswell",
-    "OPENBLAS_NUM_THREADS": "1",
     "OMP_NUM_THREADS": "2",
 }
 
 
 def pinned_environment() -> dict[str, str]:
-    """The variables this process should run under (``HNSDT_CPU=native`` keeps only the hash seed)."""
-    env = {"PYTHONHASHSEED": "0"}
+    """The variables this process should run under (``HNSDT_CPU=native`` keeps only :data:`ALWAYS`)."""
+    env = dict(ALWAYS)
     if os.environ.get("HNSDT_CPU", "pinned") != "native":
         env.update(PINNED_CPU)
     return env
