@@ -4,9 +4,10 @@ Usage: python benchmarks/cpu_determinism.py
 Each configuration runs in a fresh process: a decision transformer (L3, d128, context 10, the episode
 formulation the pipeline trains: 32 episodes of 40 steps a batch) trained 30 steps on a fixed random batch
 stream, and option-critic trained 6,000 env steps on Case 1. It prints the hash of each model's weights and the
-time per step. A row whose hash differs from the first row's shows a setting that a different machine (another
-ISA, another vendor's MKL path, another BLAS core type, another core count) would change; the last rows are what
-``hnsdt/core/reproducible.py`` pins.
+time per step, then the throughput of one (100 x 128) . (128 x 512) product on one thread, torch's ``F.linear``
+(MKL) against the DT's ``hnsdt.models.kernels.linear`` (NumPy's OpenBLAS). A row whose hash differs from the
+first row's shows a setting that a different machine (another ISA, another vendor's MKL path, another BLAS core
+type, another core count) would change; the last rows are what ``hnsdt/core/reproducible.py`` pins.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import hnsdt
 from hnsdt.envs import load_layout
 from hnsdt.baselines.options import OptionsConfig, train_options
 from hnsdt.models.dt import DecisionTransformer, DTConfig
+from hnsdt.models.kernels import linear
 from hnsdt.models.qnetwork import OptionCriticConfig
 
 def digest(model):
@@ -56,8 +58,21 @@ t = time.perf_counter()
 oc, _, _ = train_options(lay, 100, OptionCriticConfig(lay.n_flags, *lay.shape),
                          OptionsConfig(env_steps=6000, learning_starts=1000, seed=0), progress=False)
 oc_s = time.perf_counter() - t
-print(f"{torch.backends.cpu.get_cpu_capability():<7} {torch.get_num_threads():>2}  {digest(dt)} {dt_ms:6.0f} ms/step"
-      f"  {digest(oc)} {oc_s:5.1f} s")
+
+def gmacs(product, n=300):  # one (100 x 128) . (128 x 512) product, one thread: a DT layer acting for 100 episodes
+    x, w, b = torch.randn(100, 128), torch.randn(512, 128), torch.randn(512)
+    product(x, w, b)
+    t = time.perf_counter()
+    for _ in range(n):
+        product(x, w, b)
+    return n * 100 * 128 * 512 / (time.perf_counter() - t) / 1e9
+
+threads = torch.get_num_threads()
+torch.set_num_threads(1)
+with torch.no_grad():
+    torch_gmacs, ours_gmacs = gmacs(torch.nn.functional.linear), gmacs(linear)
+print(f"{torch.backends.cpu.get_cpu_capability():<7} {threads:>2}  {digest(dt)} {dt_ms:6.0f} ms/step"
+      f"  {digest(oc)} {oc_s:5.1f} s  {torch_gmacs:5.1f} {ours_gmacs:5.1f}")
 """
 
 CONFIGS = [
@@ -78,7 +93,7 @@ def main() -> int:
     base = {k: v for k, v in os.environ.items() if k not in PINNED_CPU}
     base.update(ALWAYS)
     print(f"{'configuration':<68} {'ISA':<7} {'th':>2}  {'DT weights':<12} {'DT step':>14}  "
-          f"{'OC weights':<12} {'OC 6k':>7}")
+          f"{'OC weights':<12} {'OC 6k':>7}  {'GMAC/s: torch':>13} {'ours':>5}")
     for name, extra in CONFIGS:
         out = subprocess.run([sys.executable, "-c", CHILD], env={**base, **extra}, capture_output=True, text=True)
         line = out.stdout.strip() or f"failed: {out.stderr.strip().splitlines()[-1:]}"

@@ -14,7 +14,7 @@ these alone changes the trained bytes, so each is pinned for every process of th
   same results on Intel and AMD processors alike (``AVX2`` is silently ignored on AMD);
 * ``DNNL_MAX_CPU_ISA=AVX2`` — oneDNN's JIT kernels (used by torch for some matmuls) likewise;
 * ``OPENBLAS_CORETYPE=Haswell`` — NumPy's OpenBLAS, which computes the decision transformers' linear layers
-  (:mod:`hnsdt.models.kernels`: 3.6× faster than MKL's ``COMPATIBLE`` code), picks its kernels by core type,
+  (:mod:`hnsdt.models.kernels`: about 2× MKL's ``COMPATIBLE`` code's throughput), picks its kernels by core type,
   not vendor: pinned to its AVX2/FMA kernels, which every machine of this project has (on one thread, always:
   :data:`ALWAYS`);
 * ``OMP_NUM_THREADS=2`` — parallel reductions split work by thread count: the machines of this project have 2
@@ -22,7 +22,7 @@ these alone changes the trained bytes, so each is pinned for every process of th
 * ``PYTHONHASHSEED=0`` — lerobot orders task lists through Python sets, whose order follows the string hash.
 
 The price, measured on a 2-core Intel Xeon (``benchmarks/cpu_determinism.py``): decision-transformer training
-steps about 1.15× slower (about 3× while their linear layers ran on MKL's ``COMPATIBLE`` code), option-critic
+steps about 1.1–1.3× slower (about 3× while their linear layers ran on MKL's ``COMPATIBLE`` code), option-critic
 training about 1.1×. ``HNSDT_CPU=native`` skips the pinning (:data:`ALWAYS` excepted) for speed, at the cost of
 results that depend on the CPU that made them.
 """

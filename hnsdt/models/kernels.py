@@ -2,11 +2,12 @@
 
 Why: a model's bytes depend on the GEMM kernel that computed it. torch's CPU GEMMs are MKL's, which dispatches by
 vendor and ISA, so the pipeline pins them to ``MKL_CBWR=COMPATIBLE`` (:mod:`hnsdt.core.reproducible`): SSE2
-code, measured 6.6× slower than MKL's native kernels on the Intel Xeon of this project (9 against 61 GMAC/s on a
-(100 × 128) · (128 × 512) product, one thread) — the decision transformers' training and acting spend most of
-their time there. NumPy's OpenBLAS picks its kernels by core type, and ``OPENBLAS_CORETYPE=Haswell`` (pinned
-beside MKL's setting) runs the same AVX2/FMA kernels with the same blocking on any x86-64 CPU that has AVX2,
-Intel or AMD: 34 GMAC/s on that product, 3.6× the pinned MKL (``benchmarks/cpu_determinism.py``).
+code — on the Intel Xeon of this project 11–14 GMAC/s on a (100 × 128) · (128 × 512) product on one thread,
+against 55–63 for MKL's native kernels; the decision transformers' training and acting spend most of their
+time there. NumPy's OpenBLAS picks its kernels by core type, and ``OPENBLAS_CORETYPE=Haswell`` (pinned beside
+MKL's setting) runs the same AVX2/FMA kernels with the same blocking on any x86-64 CPU that has AVX2, Intel or
+AMD: 21–28 GMAC/s on that product, about 2× the pinned MKL (``benchmarks/cpu_determinism.py``, two pinned
+processes; a one-off timing of the product alone gave 9 against 34).
 
 :func:`linear` is ``F.linear`` computed there, forward and backward (an autograd function), for CPU tensors;
 other devices keep torch's kernels. Same numbers up to rounding (tested); the bytes are OpenBLAS's.
@@ -64,7 +65,6 @@ class _Linear(torch.autograd.Function):
     @staticmethod
     def forward(ctx, x, weight, bias):
         ctx.save_for_backward(x, weight)
-        ctx.has_bias = bias is not None
         return _forward(x, weight, bias)
 
     @staticmethod
@@ -73,7 +73,7 @@ class _Linear(torch.autograd.Function):
         g = _matrix(grad)
         grad_x = torch.from_numpy(g @ weight.numpy()).reshape(x.shape) if ctx.needs_input_grad[0] else None
         grad_w = torch.from_numpy(g.T @ _matrix(x)) if ctx.needs_input_grad[1] else None
-        grad_b = torch.from_numpy(g.sum(0)) if ctx.has_bias and ctx.needs_input_grad[2] else None
+        grad_b = torch.from_numpy(g.sum(0)) if ctx.needs_input_grad[2] else None  # (False without a bias)
         return grad_x, grad_w, grad_b
 
 
