@@ -205,13 +205,13 @@ def relabelled_run(params, run, models: Path, episodes: int):
     added to its data (and to the behaviours it learns from)."""
     from dataclasses import replace
 
-    from hnsdt.core.config import method_executor
+    from hnsdt.core.config import layout_executor
     from hnsdt.data.relabel import RELABELLED, join_frames, learner_frames
 
     g = params.need("generalisation")
     model, meta = load_checkpoint(models / f"seed{run.seed}")
     frames = learner_frames(model, run.method, meta, [s.layout for s in gen.training_layouts(params)],
-                            method_executor(params, run.method), g.view_radius, g.max_steps,
+                            layout_executor(params, run.method), g.view_radius, g.max_steps,
                             [float(f) for f in params.collect.fail_probs], episodes, run.seed)
     print(f"relabelled {run.method} seed {run.seed}: {frames.episode.max() + 1} episodes, {len(frames)} frames",
           flush=True)

@@ -15,8 +15,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hnsdt.core.config import (EnvSpec, Params, baseline_settings, env_spec, fill, method_executor, model_config,
-                          train_settings)
+from hnsdt.core.config import (EnvSpec, Params, baseline_settings, env_spec, fill, layout_executor, method_executor,
+                               model_config, train_settings)
 from hnsdt.envs.layout import Layout
 from hnsdt.core.methods import METHODS, network_for, resolve
 from hnsdt.core.methods import method as lookup_method
@@ -331,7 +331,7 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
             raise ValueError(f"dataset {dataset}: view radius {radius} (0 = no observation.view), but "
                              f"generalisation.view_radius is {g.view_radius}; collect it with "
                              "`python pipeline/generalisation.py collect`")
-        data = load_frames(dataset, method_executor(params, method).operators)  # (the paper's arm: Move labels)
+        data = load_frames(dataset, layout_executor(params, method).operators)  # (Move: hindsight labels)
         facts = {"dataset": str(dataset), "family": g.family,
                  "target_return": float(data.returns_to_go[np.unique(data.episode_start)].max())}
     net_cfg, train_cfg = layout_network_configs(params, method, g.seeds[0], layouts[0])
@@ -343,6 +343,6 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
     if _budget_on_validation_layouts(params, method):
         measure = StepsToExit.on_layouts(validation(), g.max_steps,
                                          params.train.validation[method].starts, method,
-                                         method_executor(params, method), facts)
+                                         layout_executor(params, method), facts)
     return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data, facts, measure=measure)
             for seed in g.seeds]

@@ -560,13 +560,13 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     summary = pd.read_csv(tmp_path / "results/summary.csv")
     assert len(summary) == 4 * 4 * 2 and summary.success_mean.between(0, 1).all()
     # where the plan-followers' steps go: one row per sub-goal pursued, on every split; the controllers walk
-    # shortest paths (each first action right, each GoTo within its expected minimum at fail_prob 0)
+    # shortest paths (each first action right, each walking sub-goal within its expected minimum at fail_prob 0)
     segments = pd.read_csv(tmp_path / "results/segments.csv")
     assert set(segments.method) == {"hnsdt", "symbolic"} and set(segments.split) == set(table.split)
     controllers = segments[segments.method == "symbolic"]
     assert controllers.first_action_right.all() and controllers.achieved.all()
-    goto = controllers[controllers.operator.str.startswith("GoTo") & (controllers.fail_prob == 0)]
-    assert len(goto) and (goto.steps == goto.optimal_steps).all() and (goto.right_actions == goto.steps).all()
+    walks = controllers[controllers.operator.str.startswith(("GoTo", "Move")) & (controllers.fail_prob == 0)]
+    assert len(walks) and (walks.steps == walks.optimal_steps).all() and (walks.right_actions == walks.steps).all()
     with pytest.raises(ValueError, match="not in generalisation.methods"):
         stages.plan_unseen(validate(params), "options", dataset)
 
@@ -640,6 +640,38 @@ def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operator
                                    progress=False)
     assert set(table.method) == {"hnsdt_paper", "symbolic"}
     assert set(table.split) == {"train", "heldout", "minigrid", "drawn"}
+
+
+def test_our_arm_plans_over_the_experiments_operators_and_learns_their_labels(tmp_path):
+    """`generalisation.operators` is the operator set our arm's planner hands out in this experiment: HNSDT learns
+    from the collected episodes' labels of that set (Move: in hindsight, one per change of cell) and is given its
+    sub-goals, as are the LSTM's labels and the symbolic reference; the paper's arm keeps its own planner, and
+    without the knob our arm plans as on the paper's maps (`planner`)."""
+    from hnsdt.core.config import layout_executor, method_executor
+    from hnsdt.symbolic.subgoals import NAME_TO_ID
+
+    params = _tiny_generalisation_params(tmp_path)
+    g = params["generalisation"]
+    g.update(methods=["hnsdt"], baselines=["lstm_hier"], operators="move")
+    for method in ("hnsdt", "lstm_hier", "symbolic"):
+        executor = layout_executor(validate(params), method)
+        assert (executor.operators, executor.plan_mode) == ("move", params["planner"]["mode"])
+    assert layout_executor(validate(params), "hnsdt_paper") == method_executor(validate(params), "hnsdt_paper")
+    dataset = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    labels = {}
+    for operators in ("move", None):
+        g["operators"] = operators
+        for method in ("hnsdt", "lstm_hier"):
+            (run,) = stages.plan_unseen(validate(params), method, dataset)
+            labels[operators, method] = set(run.data.subgoals.tolist())
+    goto = {i for name, i in NAME_TO_ID.items() if name.startswith("GoTo")}
+    for method in ("hnsdt", "lstm_hier"):
+        assert NAME_TO_ID["Move"] in labels["move", method] and not goto & labels["move", method]
+        assert NAME_TO_ID["Move"] not in labels[None, method] and goto & labels[None, method]
+    assert layout_executor(validate(params), "hnsdt") == method_executor(validate(params), "hnsdt")
+    g["operators"] = "teleport"
+    with pytest.raises(ValueError, match=r"generalisation.operators: Input should be 'goto' or 'move'"):
+        validate(params)
 
 
 def test_no_two_splits_share_a_map_and_validation_is_never_evaluated():

@@ -103,6 +103,15 @@ def method_executor(params: Params, method: str) -> ExecutorConfig:
     return executor_config(params, METHODS[method].arm)
 
 
+def layout_executor(params: Params, method: str) -> ExecutorConfig:
+    """The executor settings of a method in the unseen-layout experiment: its arm's, our arm's operators replaced
+    by ``generalisation.operators`` where set (the labels it learns from and the sub-goals it is given)."""
+    executor, operators = method_executor(params, method), params.need("generalisation").operators
+    if operators is None or METHODS[method].arm != "ours":
+        return executor
+    return replace(executor, operators=operators)
+
+
 def collect_config(params: Params, name: str) -> CollectConfig:
     env = env_spec(params, name)
     collect = params.need("collect")

@@ -186,6 +186,9 @@ class GeneralisationParams(Section):
     value_iterations: int = Field(0, ge=0, description="the decision transformers' view encoder: > 0 plans over "
                                   "the view towards the sub-goal's target with a value-iteration module of this "
                                   "many backups (0: none)")
+    operators: Literal[OPERATOR_SETS] | None = Field(None, description="the operators our arm's planner hands "
+                                                      "its methods here (None: planner.operators); the "
+                                                      "paper's arm keeps planner.paper's")
     symmetries: Literal[1, 4, 8] = Field(1, description="the decision transformers, the LSTM and the GRU train on "
                                          "each episode, every epoch anew, on its map turned at random: 4 = a "
                                          "quarter turn, 8 = a turn and a mirror image (1: as collected)")

@@ -130,7 +130,7 @@ def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progr
     """Stage `evaluate_generalisation`: every method × seed on every evaluated layout (training, held-out,
     MiniGrid, drawn), the symbolic baseline as the reference, beside the exact optimum."""
     from hnsdt import generalisation as gen
-    from hnsdt.core.config import eval_epsilon, method_executor
+    from hnsdt.core.config import eval_epsilon, layout_executor
     from hnsdt.core.methods import REFERENCE
     from hnsdt.evaluation.evaluate import evaluate_layouts
 
@@ -140,7 +140,7 @@ def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progr
     gen.check_sources(sources, max(fps))
     methods = [*g.learned, REFERENCE]
     table = evaluate_layouts(methods, list(g.seeds), sources, fps, g.episodes,
-                             {m: method_executor(params, m) for m in methods},  # (the paper's arm plans over Move)
+                             {m: layout_executor(params, m) for m in methods},  # (generalisation.operators)
                              {m: eval_epsilon(params, m) for m in g.learned}, models, out,
                              compute or compute_settings(params), progress)
     print(f"wrote {out}/episodes.csv ({len(table)} episodes), summary.csv, segments.csv, layouts.csv")

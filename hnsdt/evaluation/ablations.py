@@ -1,8 +1,9 @@
 """What each ingredient of the unseen-layout experiment buys: measured variants, the report's ablation table and
 its scaling figure (held-out steps / optimum against the number of training maps).
 
-A variant is the experiment with some knobs changed — the encoder, the number of training maps, turned maps, relabelled
-rounds of the learner's own states — run by ``python benchmarks/generalisation.py --record NAME --ingredient I``
+A variant is the experiment with some knobs changed — the encoder, the number of training maps, turned maps,
+relabelled rounds of the learner's own states, the operators the planner hands out — run by ``python
+benchmarks/generalisation.py --record NAME --ingredient I``
 through the experiment's own stage functions. ``dvc repro`` does not rerun them (one costs minutes to half an
 hour of 2 cores; 4,000 maps more), so each row carries what made it: the command, the git revision, the digest
 of the params and of the dataset it trained on, the CPU and the time. The file is kept in git
@@ -23,7 +24,8 @@ import pandas as pd  # noqa: E402
 from hnsdt.core.fileio import atomic_file  # noqa: E402
 from hnsdt.core.methods import LEARNED, METHODS, PROPOSED  # noqa: E402
 
-INGREDIENTS = ("reference", "encoder", "maps", "augmentation", "relabelling", "family")  # reference: the default's knobs
+INGREDIENTS = ("reference", "encoder", "maps", "augmentation", "relabelling", "family",
+               "operators")  # reference: the default's knobs
 COLUMNS = [  # one row per variant x method x split
     "variant", "ingredient", "family", "train_layouts", "episodes_per_map", "encoder", "relabel_rounds", "seeds",
     "method", "split", "success", "success_std", "steps_ratio", "validation_steps",

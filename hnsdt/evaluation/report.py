@@ -606,8 +606,8 @@ TARGET_SUCCESS, TARGET_STEPS = 0.95, 1.10  # HNSDT on maps it never saw: of the 
 def target_lines(summ: pd.DataFrame, method: str = PROPOSED, why: dict | None = None) -> list[str]:
     """Per unseen split, whether ``method`` reaches ``TARGET_SUCCESS`` × the exact optimum's success and at most
     ``TARGET_STEPS`` × its expected steps at every failure probability (each a mean over seeds), and if not,
-    by how much at its worst failure probability, and (``why``, :func:`unseen_decomposition`) how its GoTo
-    sub-goals went there."""
+    by how much at its worst failure probability, and (``why``, :func:`unseen_decomposition`) how its walking
+    sub-goals (GoTo or Move) went there."""
     out = []
     for split, d in summ[(summ.method == method) & (summ.split != "train")].groupby("split", sort=False):
         share = d.success_mean / d.optimal_success
@@ -619,7 +619,7 @@ def target_lines(summ: pd.DataFrame, method: str = PROPOSED, why: dict | None = 
                 f" — lowest success {share.min():.3f} of the optimum's (fail_prob {worst_share.fail_prob:g}), " + steps)
         if not met and why and split in why:
             ratio, right, reached, overran, ended = why[split]
-            line += (f"; measured cause: its GoTo sub-goals took {ratio:.2f}× their minimum steps, {right:.3f} of "
+            line += (f"; measured cause: its walking sub-goals took {ratio:.2f}× their minimum steps, {right:.3f} of "
                      f"their actions on a shortest path; {reached:.3f} were reached within their allowance, "
                      f"{overran:.3f} overran it (replanned), {ended:.3f} were still open at the step limit")
         out.append(line)
@@ -630,7 +630,7 @@ def unseen_decomposition(results: Path, episodes: pd.DataFrame, method: str = PR
     """Where ``method``'s steps go on the unseen-layout splits, beside the symbolic baseline (the same planner,
     hand-written controllers): :func:`decomposition_cells` per split, over every seed and failure probability
     (``segments.csv``; ``episodes``: the ``episodes.csv`` beside it); and per split the measured cause behind
-    :func:`target_lines`: ``{split: (steps / minimum of its GoTo sub-goals, share of their actions on a shortest
+    :func:`target_lines`: ``{split: (steps / minimum of its GoTo or Move sub-goals, share of their actions on a shortest
     path, shares achieved, overran and still open at the episode's end)}``."""
     from hnsdt.core.methods import CONTROLLER_FLOOR
 
@@ -648,10 +648,10 @@ def unseen_decomposition(results: Path, episodes: pd.DataFrame, method: str = PR
              "|---|---|" + "---|" * 2 * len(DECOMPOSITION_HEAD)]
     for split, kind, *cells in decomposition_cells(seg, n_ep, ["split"], pair, sort=False):
         lines.append(f"| {SPLIT_LABELS.get(split, split)} | {kind} | " + " | ".join(cells) + " |")
-    goto = seg[(seg.method == method) & seg.operator.str.startswith("GoTo")]
+    walks = seg[(seg.method == method) & seg.operator.str.startswith(("GoTo", "Move"))]
     why = {split: (d.steps.sum() / d.optimal_steps.sum(), d.right_actions.sum() / d.steps.sum(),
                    *(d.outcome.eq(o).mean() for o in ("achieved", "overran", "ended")))
-           for split, d in goto.groupby("split", sort=False)}
+           for split, d in walks.groupby("split", sort=False)}
     return lines, why
 
 
