@@ -742,6 +742,7 @@ def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
             "generalisation_validation_families": list(g.validation_families) if g else [],
             "generalisation_family": g.family if g else "?", "generalisation_train": g.train_layouts if g else "?",
             "generalisation_radius": g.view_radius if g else "?",
+            "generalisation_operators": (g.operators if g and g.operators else params.planner.operators),
             "generalisation_splits": [f"{SPLIT_LABELS.get(s, s)}: {n} ({sizes[s]} cells)" for s, n in counts.items()],
             "generalisation_seeds": int(summ.seeds.max()),
             "generalisation_episodes": int(episodes.groupby(["method", "seed", "layout", "fail_prob"]).size().max()),
