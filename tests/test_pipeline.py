@@ -102,7 +102,7 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     assert "hand-drawn maps: 6 (5–16 × 9–16 cells)" in report and "against the target on maps it never saw" in report
     assert "Per hand-drawn map" in report and "| `spiral_9x9` |" in report
     segments = pd.read_csv(repo_copy / "generalisation/results/segments.csv")  # where HNSDT's steps go, and why
-    assert set(segments.method) == {"hnsdt", "symbolic"} and "| hand-drawn maps | GoTo |" in report
+    assert set(segments.method) == {"hnsdt", "symbolic"} and "| hand-drawn maps | Move |" in report
     assert "## Unseen layouts" in report and (repo_copy / "report/figures/generalisation.png").is_file()
     assert "### What each ingredient buys" in report  # the measured variants (benchmarks/results/generalisation.csv)
     assert (repo_copy / "report/figures/scaling.png").is_file() and "![scaling](figures/scaling.png)" in report
