@@ -707,6 +707,8 @@ def drawn_lines(episodes: pd.DataFrame) -> str:
 
 def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
     """The report's unseen-layout section: the figure, the table and per-fail_prob numbers."""
+    from hnsdt.core.config import layout_executor
+
     summ = pd.read_csv(results / "summary.csv")
     layouts = pd.read_csv(results / "layouts.csv")
     episodes = pd.read_csv(results / "episodes.csv")
@@ -742,7 +744,7 @@ def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
             "generalisation_validation_families": list(g.validation_families) if g else [],
             "generalisation_family": g.family if g else "?", "generalisation_train": g.train_layouts if g else "?",
             "generalisation_radius": g.view_radius if g else "?",
-            "generalisation_operators": (g.operators if g and g.operators else params.planner.operators),
+            "generalisation_operators": layout_executor(params, PROPOSED).operators if g else "?",
             "generalisation_splits": [f"{SPLIT_LABELS.get(s, s)}: {n} ({sizes[s]} cells)" for s, n in counts.items()],
             "generalisation_seeds": int(summ.seeds.max()),
             "generalisation_episodes": int(episodes.groupby(["method", "seed", "layout", "fail_prob"]).size().max()),
