@@ -151,12 +151,14 @@ def kept_validation(models: Path, seeds: list[int]) -> dict[int, dict]:
     for seed in seeds:
         usage = load_checkpoint(models / f"seed{seed}")[1].get("usage", {})
         if usage.get("validation_steps"):
-            kept[seed] = min(usage["validation_steps"], key=lambda h: h["value"])
+            history = usage["validation_steps"]
+            kept[seed] = min(history, key=lambda h: h["value"]) | {"history": [h["value"] for h in history]}
     return kept
 
 
 def validation_lines(kept: dict[int, dict], method: str, label: str) -> list[str]:
-    return [f"{method}{label} seed {seed}: {h['value']:.2f} steps at epoch {h['epoch']}" for seed, h in kept.items()]
+    return [f"{method}{label} seed {seed}: {h['value']:.2f} steps at epoch {h['epoch']} (per epoch: "
+            + " ".join(f"{v:.1f}" for v in h["history"]) + ")" for seed, h in kept.items()]
 
 
 def mean_validation(kept: dict[int, dict]) -> float:

@@ -133,7 +133,8 @@ def cmd_report(args) -> None:
     stages.report(load_params(args.params), Path(args.results), Path(args.out),
                   generalisation=Path(args.generalisation) if args.generalisation else None,
                   headline=Path(args.headline) if args.headline else None,
-                  ablations=Path(args.ablations) if args.ablations else None)
+                  ablations=Path(args.ablations) if args.ablations else None,
+                  experiments=Path(args.experiments) if args.experiments else None)
 
 
 def cmd_replay(args) -> None:
@@ -208,7 +209,9 @@ def cmd_generalisation(args) -> None:
         if args.action != "evaluate":
             raise ValueError("--drawn is an option of generalisation evaluate")
         drawn = ["generalisation.drawn=" + json.dumps({"folder": args.drawn, "max_steps": args.drawn_max_steps})]
-    params = load_params(args.params, drawn)
+    from hnsdt.core.config import unseen_experiment
+
+    params = unseen_experiment(load_params(args.params, drawn), args.experiment)
     params.need("generalisation")  # "missing key generalisation" before any work
     if args.action == "collect":
         stages.collect_unseen(params, Path(args.out), progress=not args.quiet)
@@ -319,6 +322,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "keys and doors), the split `drawn` in place of generalisation.drawn's folder")
     p.add_argument("--drawn-max-steps", type=int, default=250, help="evaluate: the episode step limit on the "
                    "--drawn maps (default: 250)")
+    p.add_argument("--experiment", help="a name of unseen_experiments in params.yaml: its changes to the "
+                   "generalisation section apply")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     _compute_arguments(p)
     p.set_defaults(func=cmd_generalisation)
@@ -333,6 +338,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--ablations", help="measured variants of the unseen-layout experiment (e.g. "
                    "benchmarks/results/generalisation.csv, written by benchmarks/generalisation.py --record): "
                    "the report's ablation table and scaling figure")
+    p.add_argument("--experiments", help="the folder of the further unseen-layout experiments' outputs (e.g. "
+                   "generalisation/experiments, one folder per name of unseen_experiments)")
     p.set_defaults(func=cmd_report)
 
     p = sub.add_parser("replay", help="find or render the recording of an episode (.rrd for rerun, .mcap for "

@@ -156,6 +156,9 @@ def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: 
             data, facts = frames, {"dataset": str(dataset)}
         else:
             data, facts = (bs.env.layout, bs.env.max_steps), {}
+        if getattr(bs.train, "patience", 0):
+            raise params.error(f"baselines.{method}.patience stops on validation layouts, which only the "
+                               f"unseen-layout experiment has: set it in generalisation.budgets.{method}")
         runs.append(TrainTask(method, seed, bs.model, bs.train, data, facts))
     return runs
 
@@ -195,7 +198,7 @@ def train_run(task: TrainTask):
     half = (train_cfg.env_steps if online else train_cfg.epochs) // 2
     trainer = resolve(METHODS[method].trainer)
     args = task.data if online else (task.data,)  # online: (layout(s), max_steps)
-    extra = {"measure": task.measure} if task.measure is not None else {}  # (decision transformers only)
+    extra = {"measure": task.measure} if task.measure is not None else {}  # (DTs; offline baselines with patience)
     out = trainer(*args, model_cfg, train_cfg, progress=task.progress, desc=f"{method} seed {seed}",
                   network=network_for(method, model_cfg), state=task.state,
                   stop_after=(half or None) if task.split else None, **extra)
@@ -289,11 +292,15 @@ def layout_network_configs(params: Params, method: str, seed: int, layout: Layou
         params, method, replace(bs.train, **turned))
 
 
-def _budget_on_validation_layouts(params: Params, method: str) -> bool:
-    """Does ``method`` (a DT with a ``train.validation`` entry) stop at the plateau of its steps to the exit on
-    the validation layouts (:class:`StepsToExit`)?"""
-    return (lookup_method(method).stage == "train" and params.need("generalisation").validation_layouts > 0
-            and method in params.train.validation)
+def _budget_on_validation_layouts(params: Params, method: str, train_cfg=None) -> bool:
+    """Does ``method`` stop at the plateau of its steps to the exit on the validation layouts
+    (:class:`StepsToExit`)? A DT with a ``train.validation`` entry does, an offline baseline with ``patience``
+    (``train_cfg``, its training config) does."""
+    if params.need("generalisation").validation_layouts == 0:
+        return False
+    if lookup_method(method).stage == "train":
+        return method in params.train.validation
+    return getattr(train_cfg, "patience", 0) > 0
 
 
 def _budget(params: Params, method: str, train_cfg):
@@ -340,9 +347,12 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
         raise ValueError(f"{method} learns from {wanted} episodes and {dataset} holds none; set "
                          "generalisation.random_episodes_per_layout > 0 (random walks) and collect again")
     measure = None
-    if _budget_on_validation_layouts(params, method):
-        measure = StepsToExit.on_layouts(validation(), g.max_steps,
-                                         params.train.validation[method].starts, method,
-                                         layout_executor(params, method), facts)
+    if _budget_on_validation_layouts(params, method, train_cfg):
+        starts = params.train.validation[method].starts if method in params.train.validation else train_cfg.starts
+        measure = StepsToExit.on_layouts(validation(), g.max_steps, starts, method, layout_executor(params, method),
+                                         facts)
+    elif lookup_method(method).stage != "train" and getattr(train_cfg, "patience", 0):  # (a DT's: train.validation)
+        raise params.error(f"generalisation.budgets.{method}.patience stops on the validation layouts: set "
+                           "generalisation.validation_layouts > 0")
     return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data, facts, measure=measure)
             for seed in g.seeds]

@@ -1,10 +1,12 @@
-"""DVC stages `collect_generalisation`, `train_generalisation` and `evaluate_generalisation`: the unseen-layout
-experiment (hnsdt.generalisation, through hnsdt.core.stages).
+"""DVC stages `collect_generalisation`, `train_generalisation`, `evaluate_generalisation` and
+`unseen_experiment@NAME`: the unseen-layout experiments (hnsdt.generalisation, through hnsdt.core.stages).
 
 Usage: python pipeline/generalisation.py collect --out generalisation/dataset
        python pipeline/generalisation.py train --method METHOD --dataset generalisation/dataset
            --out generalisation/models/METHOD --curves plots/train/generalisation-METHOD
        python pipeline/generalisation.py evaluate --models generalisation/models --out generalisation/results
+       python pipeline/generalisation.py all --experiment NAME --out generalisation/experiments/NAME
+(--experiment NAME, on any action: the params as `unseen_experiments.NAME` changes them.)
 """
 
 import argparse
@@ -28,6 +30,10 @@ if __name__ == "__main__":
     p = sub.add_parser("evaluate")
     for name in ("--models", "--out"):
         p.add_argument(name, required=True, type=Path)
+    sub.add_parser("all").add_argument("--out", required=True, type=Path)
+    for p in sub.choices.values():
+        p.add_argument("--experiment", help="a name of unseen_experiments in params.yaml")
     args = vars(parser.parse_args())
-    stage = {"collect": stages.collect_unseen, "train": stages.train_unseen, "evaluate": stages.evaluate_unseen}
+    stage = {"collect": stages.collect_unseen, "train": stages.train_unseen, "evaluate": stages.evaluate_unseen,
+             "all": stages.run_unseen_experiment}
     sys.exit(stages.run(stage[args.pop("action")], **args))

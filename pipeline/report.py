@@ -3,6 +3,7 @@ metrics (hnsdt.core.stages.report).
 
 Usage: python pipeline/report.py --results results --generalisation generalisation/results --out report
        --headline metrics/headline.json --ablations benchmarks/results/generalisation.csv
+       --experiments generalisation/experiments
 """
 
 import argparse
@@ -17,8 +18,8 @@ from hnsdt.core import stages  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    for name in ("--results", "--generalisation", "--out", "--headline", "--ablations"):
+    for name in ("--results", "--generalisation", "--out", "--headline", "--ablations", "--experiments"):
         parser.add_argument(name, required=True, type=Path)
     args = parser.parse_args()
     sys.exit(stages.run(stages.report, results=args.results, out=args.out, generalisation=args.generalisation,
-                        headline=args.headline, ablations=args.ablations))
+                        headline=args.headline, ablations=args.ablations, experiments=args.experiments))

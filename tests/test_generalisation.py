@@ -763,6 +763,66 @@ def test_the_dts_budget_is_chosen_on_the_validation_layouts(tmp_path):
     assert run.measure is None and run.train_cfg.validation == params["train"]["validation"]["hnsdt"]["share"]
 
 
+def test_an_offline_baselines_patience_stops_it_on_the_validation_layouts(tmp_path):
+    """``generalisation.budgets.<offline baseline>.patience``: the LSTM measures its steps to the exit on the
+    validation layouts after every epoch, stops once they have not improved for ``patience`` epochs (``epochs``
+    the cap) and keeps the best epoch's weights, whose measure is the history's best. Without validation
+    layouts, or set for the paper protocol (which has none), patience is one line naming the knob."""
+    from hnsdt import generalisation as gen
+    from hnsdt.core.config import ParamsError
+    from hnsdt.training import plan_runs, train_run
+
+    params = _tiny_generalisation_params(tmp_path)
+    params["generalisation"].update(methods=["hnsdt"], baselines=["lstm_hier"], validation_layouts=1,
+                                    budgets={"lstm_hier": {"epochs": 6, "patience": 1, "starts": 6}})
+    dataset = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    (run,) = stages.plan_unseen(validate(params), "lstm_hier", dataset)
+    assert [c.layout for c in run.measure.courses] == [s.layout for s in gen.validation_layouts(validate(params))]
+    model, facts, _ = train_run(run)
+    usage = facts["usage"]
+    history = [h["value"] for h in usage["validation_steps"]]
+    best = int(np.argmin(history))
+    assert usage["best_epoch"] == best + 1 and 1 <= len(history) <= 6
+    assert usage["stopped_early"] == (len(history) < 6) and (len(history) == 6 or len(history) == best + 2)
+    assert run.measure(model) == history[best]  # the kept weights are the best epoch's
+    params["generalisation"]["validation_layouts"] = 0
+    with pytest.raises(ParamsError, match=r"generalisation.budgets.lstm_hier.patience .*validation_layouts > 0"):
+        stages.plan_unseen(validate(params), "lstm_hier", dataset)
+    params["baselines"]["lstm_hier"]["patience"] = 2
+    params["baselines"]["offline"] = ["lstm_hier"]
+    with pytest.raises(ParamsError, match=r"baselines.lstm_hier.patience stops on validation layouts"):
+        plan_runs(validate(params), "keydoor", "lstm_hier", [0], dataset)
+
+
+def test_a_further_experiment_is_a_params_block_of_the_keys_it_changes(tmp_path):
+    """``unseen_experiments.<name>``: the `generalisation` section with that block's keys changed is what every
+    stage of the experiment reads (the section itself unchanged); a bad key, value or name is one line naming it."""
+    from hnsdt import generalisation as gen
+    from hnsdt.core.config import ParamsError, unseen_experiment
+
+    params = _tiny_generalisation_params(tmp_path)
+    params["unseen_experiments"] = {"two_keys": {"family": "multikeydoor", "max_steps": 250, "minigrid": [],
+                                                 "validation_families": [], "drawn": None, "seeds": [3]}}
+    base = validate(params)
+    mine = unseen_experiment(base, "two_keys")
+    assert (mine.generalisation.family, mine.generalisation.seeds, mine.generalisation.train_layouts) == (
+        "multikeydoor", [3], base.generalisation.train_layouts)
+    assert base.generalisation.family == params["generalisation"]["family"] and unseen_experiment(base, None) is base
+    splits = gen.layout_splits(mine)
+    assert {s.split for s in splits} == {"train", "heldout"} and {s.layout.n_flags for s in splits} == {6}
+    with pytest.raises(ParamsError, match=r"unseen_experiments: no experiment 'three'; expected one of \['two_keys'\]"):
+        unseen_experiment(base, "three")
+    for changes, words in (({"familly": "keydoor"}, "unseen_experiments: two_keys.familly: not a generalisation key"),
+                           ({"max_steps": "long"}, "unseen_experiments: two_keys.max_steps: Input should be a valid "
+                                                   "integer")):
+        params["unseen_experiments"] = {"two_keys": changes}
+        with pytest.raises(ParamsError, match=words):
+            validate(params)
+    params["unseen_experiments"] = {"Two keys": {}}
+    with pytest.raises(ParamsError, match="String should match pattern"):
+        validate(params)
+
+
 def test_a_folder_of_drawn_maps_is_checked_with_one_line_naming_the_problem(tmp_path):
     from hnsdt import generalisation as gen
     from hnsdt.cli import main

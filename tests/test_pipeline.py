@@ -20,9 +20,11 @@ pytestmark = pytest.mark.slow  # (pytest-xdist runs a file on one worker, in ord
 STAGES = {m: METHODS[m].stage for m in LEARNED}  # learned method -> its DVC stage
 _UNSEEN = yaml.safe_load((REPO / "params.yaml").read_text())["generalisation"]  # the unseen-layout experiment
 UNSEEN = _UNSEEN["methods"] + _UNSEEN["baselines"]
+EXPERIMENTS = list(yaml.safe_load((REPO / "params.yaml").read_text()).get("unseen_experiments", {}))  # further ones
 UNSEEN_STAGES = {"collect_generalisation", "evaluate_generalisation"} | {
     f"train_generalisation@{m}" for m in _UNSEEN["methods"]} | {
-    f"train_generalisation_baselines@{m}" for m in _UNSEEN["baselines"]}
+    f"train_generalisation_baselines@{m}" for m in _UNSEEN["baselines"]} | {
+    f"unseen_experiment@{name}" for name in EXPERIMENTS}
 
 
 def _set(repo: Path, section: str, key: str, value) -> None:
@@ -73,7 +75,8 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     shown = json.loads(run(["dvc", "metrics", "show", "--json"], repo_copy))  # the headline, declared as metrics
     headline = next(iter(shown.values()))["data"]["metrics/headline.json"]["data"]  # (the workspace's)
     learned = {m for m, entry in METHODS.items() if entry.training != "none"}
-    assert set(headline) == {"keydoor", "heldout", "minigrid", "drawn"} and "symbolic" not in headline["keydoor"]
+    assert set(headline) == {"keydoor", "heldout", "minigrid", "drawn", *(f"{e}.heldout" for e in EXPERIMENTS)}
+    assert "symbolic" not in headline["keydoor"]
     assert sum(len(split) for split in headline.values()) <= 40 and set(headline["keydoor"]) >= learned
     for name in ("summary.csv", "metrics.json"):  # the git-tracked copies the README's table is made from
         assert (repo_copy / "metrics" / name).read_bytes() == (repo_copy / "results" / name).read_bytes()
@@ -107,6 +110,10 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     assert "### What each ingredient buys" in report  # the measured variants (benchmarks/results/generalisation.csv)
     assert (repo_copy / "report/figures/scaling.png").is_file() and "![scaling](figures/scaling.png)" in report
     assert lock["stages"]["collect_generalisation"]["outs"][0]["md5"] in report
+    for name in EXPERIMENTS:  # each further experiment: its stage's outputs, a section of the report
+        more = pd.read_csv(repo_copy / f"generalisation/experiments/{name}/results/episodes.csv")
+        assert set(more.split) == {"train", "heldout"} and f"### Unseen layouts, experiment `{name}`" in report
+        assert (repo_copy / f"generalisation/experiments/{name}/models/hnsdt/seed0/model.safetensors").is_file()
     assert (repo_copy / "report/figures/environments.png").stat().st_size > 10_000
     rrds = sorted((repo_copy / "recordings").rglob("*.rrd"))
     verify = subprocess.run([str(Path(sys.executable).parent / "rerun"), "rrd", "verify", *map(str, rrds)],

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from hnsdt.models.windows import Frames
-from hnsdt.models.fit import FitState, Objective, fit
+from hnsdt.models.fit import FitState, Objective, Validation, fit
 from hnsdt.models.recurrent import START_ACTION, RecurrentConfig, RecurrentPolicy
 from hnsdt.models.view import turned_maps
 
@@ -31,6 +31,10 @@ class RecurrentTrainConfig:
     behaviours: tuple[str, ...] = ()  # collection behaviours to learn from (empty = all)
     symmetries: int = 1  # each episode, every epoch anew, on its map turned at random (view networks only;
     #                      hnsdt.models.view.turned_maps)
+    patience: int = 0  # > 0: stop once the steps to the exit on validation layouts (the unseen-layout
+    #                    experiment's; hnsdt.training.StepsToExit) have not improved for this many epochs, keeping
+    #                    the best epoch's weights; `epochs` is then the cap. 0: train every epoch
+    starts: int = 64  # with patience: about this many start states, spread over the validation layouts
 
 
 def training_episodes(frames: Frames, behaviours=()) -> tuple[np.ndarray, np.ndarray]:
@@ -57,12 +61,18 @@ def episode_batch(frames: Frames, starts: np.ndarray, lengths: np.ndarray) -> di
 
 def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTrainConfig, progress: bool = True,
                     desc: str = "train", network: type = RecurrentPolicy, state: FitState | None = None,
-                    stop_after: int | None = None):
+                    stop_after: int | None = None, measure=None):
     """Train from scratch (or on from ``state``); returns the model (eval mode), its curve and the data used,
-    or a :class:`~hnsdt.models.fit.FitState` when ``stop_after`` epochs come before the end."""
+    or a :class:`~hnsdt.models.fit.FitState` when ``stop_after`` epochs come before the end. With
+    ``cfg.patience``, training stops at the plateau of ``measure(model)`` (lower is better, e.g.
+    :class:`hnsdt.training.StepsToExit`), which the data used then records per epoch."""
     starts, lengths = training_episodes(frames, cfg.behaviours)
     if len(starts) == 0:
         raise ValueError(f"no training episodes from behaviours {list(cfg.behaviours) or 'any'} in the dataset")
+    if cfg.patience and measure is None:
+        raise ValueError("patience > 0 stops on the steps to the exit on validation layouts, which only the "
+                         "unseen-layout experiment has (generalisation.validation_layouts)")
+    validation = Validation(measure, cfg.patience) if cfg.patience else None
     per_epoch = int(np.ceil(len(starts) / cfg.batch_size))
     objective = Objective(
         np.arange(len(starts)), lambda rows: episode_batch(frames, starts[rows], lengths[rows]),
@@ -71,13 +81,16 @@ def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTr
         clip_grad_norm=1.0, augment=turned_maps(model_cfg, cfg.symmetries, cfg.seed))
     out = fit(network, model_cfg, objective, epochs=cfg.epochs, max_steps=cfg.max_steps, batch_size=cfg.batch_size,
               lr=cfg.lr, seed=cfg.seed, device=torch.device(cfg.device), log_every=cfg.log_every,
-              progress=progress, desc=desc, state=state, stop_after=stop_after)
+              progress=progress, desc=desc, state=state, stop_after=stop_after, validation=validation)
     if isinstance(out, FitState):
         return out
     model, curve = out
     seen, step = (curve[-1]["frames_seen"], curve[-1]["step"]) if curve else (0, 0)
     usage = {"dataset_frames": int(lengths.sum()), "dataset_episodes": int(len(starts)), "frames_seen": seen,
              "gradient_steps": step, "epochs": round(seen / int(lengths.sum()), 3)}
+    if validation is not None:  # the budget the evidence chose
+        usage |= {"best_epoch": validation.best_epoch, "stopped_early": validation.stopped_early,
+                  f"validation_{getattr(measure, 'name', 'steps')}": validation.history}
     return model, curve, usage
 
 

@@ -112,6 +112,22 @@ def layout_executor(params: Params, method: str) -> ExecutorConfig:
     return replace(executor, operators=operators)
 
 
+def unseen_experiment(params: Params, name: str | None) -> Params:
+    """``params`` as the unseen-layout experiment ``name`` of ``unseen_experiments`` sees them: its changes in
+    the ``generalisation`` section (None: the section as it is), so every stage of that experiment runs on it."""
+    from hnsdt.core.params import merged_experiment
+
+    if name is None:
+        return params
+    if name not in params.unseen_experiments:
+        raise params.error(f"unseen_experiments: no experiment {name!r}; expected one of "
+                           f"{sorted(params.unseen_experiments)}")
+    section = merged_experiment(params.need("generalisation"), name, params.unseen_experiments[name])
+    derived = params.model_copy(update={"generalisation": section})
+    derived._source, derived._raw = f"{params.source} (unseen_experiments.{name})", params.raw
+    return derived
+
+
 def collect_config(params: Params, name: str) -> CollectConfig:
     env = env_spec(params, name)
     collect = params.need("collect")

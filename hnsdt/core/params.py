@@ -264,7 +264,19 @@ class Params(Section):
     compute: ComputeParams = ComputeParams()
     theorems: TheoremsParams | None = None
     generalisation: GeneralisationParams | None = None
+    unseen_experiments: dict[Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$")], dict[str, Any]] = Field(
+        default_factory=dict, description="further unseen-layout experiments: per name, the `generalisation` keys "
+        "it changes (each one stage, unseen_experiment@<name>, outputs under generalisation/experiments/<name>)")
 
+    @field_validator("unseen_experiments")
+    @classmethod
+    def _experiments(cls, value, info):
+        base = info.data.get("generalisation")
+        if value and base is None:
+            raise ValueError("needs the generalisation section (each experiment changes some of its keys)")
+        for name, changes in value.items():
+            merged_experiment(base, name, changes)
+        return value
 
     @property
     def source(self) -> str:
@@ -288,6 +300,19 @@ class Params(Section):
 
 
 SECTIONS = tuple(Params.model_fields)
+
+
+def merged_experiment(base: GeneralisationParams, name: str, changes: dict) -> GeneralisationParams:
+    """The section of the unseen-layout experiment ``name``: ``base`` with ``changes`` (its keys) in place; a
+    bad key or value is one line naming ``<name>.<key>``."""
+    try:
+        return GeneralisationParams.model_validate({**base.model_dump(), **changes})
+    except ValidationError as e:
+        err = e.errors()[0]
+        key = ".".join(str(part) for part in (name, *err["loc"]))
+        if err["type"] == "extra_forbidden":
+            raise ValueError(f"{key}: not a generalisation key") from None
+        raise ValueError(f"{key}: {err['msg'].removeprefix('Value error, ')}") from None
 
 
 def validate(raw: Any, source: str = "params") -> Params:

@@ -80,11 +80,12 @@ def evaluate(params: Params, models: Path, datasets: Path, out: Path, recordings
 
 
 def report(params: Params, results: Path, out: Path, generalisation: Path | None = None,
-           headline: Path | None = None, ablations: Path | None = None) -> Path:
+           headline: Path | None = None, ablations: Path | None = None, experiments: Path | None = None) -> Path:
     """Stage `report`: figures and report.md, and the headline metrics (``headline``)."""
     from hnsdt.evaluation.report import write_report
 
-    path = write_report(params, results, out, generalisation=generalisation, headline=headline, ablations=ablations)
+    path = write_report(params, results, out, generalisation=generalisation, headline=headline, ablations=ablations,
+                        experiments=experiments)
     print(f"wrote {path}")
     return path
 
@@ -147,6 +148,17 @@ def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progr
     return table
 
 
+def run_unseen_experiment(params: Params, out: Path, compute=None, progress: bool = True):
+    """Stage `unseen_experiment@NAME` (``params`` as :func:`hnsdt.core.config.unseen_experiment` gives them): the
+    three stages above in one process — ``out``/dataset, ``out``/models/METHOD and ``out``/curves/METHOD for
+    every learned method, ``out``/results — each part written whole."""
+    out = Path(out)
+    dataset = collect_unseen(params, out / "dataset", progress=progress)
+    for method in params.need("generalisation").learned:
+        train_unseen(params, method, dataset, out / "models" / method, out / "curves" / method, compute, progress)
+    return evaluate_unseen(params, out / "models", out / "results", compute, progress)
+
+
 def guarded(fn: Callable[..., object], *args, **kwargs) -> int:
     """``fn(*args, **kwargs)`` under the command line's error contract: 0, or 2 after one ``hnsdt: error:`` line
     naming the problem (the ``hnsdt`` command and every stage script use it)."""
@@ -160,6 +172,10 @@ def guarded(fn: Callable[..., object], *args, **kwargs) -> int:
     return 0
 
 
-def run(stage: Callable[..., object], params_path: str | Path = "params.yaml", **arguments) -> int:
-    """What a stage script runs: ``stage(load_params(params_path), **arguments)``, :func:`guarded`."""
-    return guarded(lambda: stage(load_params(params_path), **arguments))
+def run(stage: Callable[..., object], params_path: str | Path = "params.yaml", experiment: str | None = None,
+        **arguments) -> int:
+    """What a stage script runs: ``stage(load_params(params_path), **arguments)``, :func:`guarded`; with
+    ``experiment``, the params as that unseen-layout experiment sees them."""
+    from hnsdt.core.config import unseen_experiment
+
+    return guarded(lambda: stage(unseen_experiment(load_params(params_path), experiment), **arguments))

@@ -705,16 +705,9 @@ def drawn_lines(episodes: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
-def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
-    """The report's unseen-layout section: the figure, the table and per-fail_prob numbers."""
-    from hnsdt.core.config import layout_executor
-
-    summ = pd.read_csv(results / "summary.csv")
-    layouts = pd.read_csv(results / "layouts.csv")
-    episodes = pd.read_csv(results / "episodes.csv")
-    table = generalisation_table(summ)
-    generalisation_figure(table, figure)
-    steps, why = unseen_decomposition(results, episodes)
+def _split_table(table: pd.DataFrame) -> list[str]:
+    """The markdown rows of :func:`generalisation_table`: per method, success ± std and steps / optimum on each
+    split, and its held-out over its training success."""
     splits = list(dict.fromkeys(table.split))
     head = "| method | " + " | ".join(f"{SPLIT_LABELS.get(s, s)}: success | steps / opt" for s in splits)
     lines = [head + " | held-out / training success |", "|---" * (2 * len(splits) + 2) + "|"]
@@ -725,6 +718,41 @@ def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
         ratio = (d.success.get("heldout", np.nan) / d.success.get("train", np.nan)
                  if d.success.get("train", 0) > 0 else np.nan)
         lines.append(f"| {_label(method)} | {cells} | {_fmt(ratio, '.2f')} |")
+    return lines
+
+
+def experiment_contexts(params: Params, folder: Path) -> list[dict]:
+    """The report's lines of each experiment of ``unseen_experiments``, from ``folder``/NAME/results: what it
+    changes, its table (:func:`_split_table`) and HNSDT against the target (:func:`target_lines`)."""
+    from hnsdt.core.config import layout_executor, unseen_experiment
+
+    out = []
+    for name, changes in params.unseen_experiments.items():
+        results = Path(folder) / name / "results"
+        if not (results / "summary.csv").is_file():
+            raise FileNotFoundError(f"{results / 'summary.csv'}: no results of the unseen-layout experiment {name} "
+                                    f"(run `dvc repro unseen_experiment@{name}`)")
+        g = unseen_experiment(params, name).generalisation
+        summ = pd.read_csv(results / "summary.csv")
+        out.append({"name": name, "changes": ", ".join(f"`{k}: {v}`" for k, v in changes.items()),
+                    "family": g.family, "train": g.train_layouts, "seeds": int(summ.seeds.max()),
+                    "operators": layout_executor(unseen_experiment(params, name), PROPOSED).operators,
+                    "results": str(results / "summary.csv"), "table": "\n".join(_split_table(generalisation_table(summ))),
+                    "targets": target_lines(summ)})
+    return out
+
+
+def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
+    """The report's unseen-layout section: the figure, the table and per-fail_prob numbers."""
+    from hnsdt.core.config import layout_executor
+
+    summ = pd.read_csv(results / "summary.csv")
+    layouts = pd.read_csv(results / "layouts.csv")
+    episodes = pd.read_csv(results / "episodes.csv")
+    table = generalisation_table(summ)
+    generalisation_figure(table, figure)
+    steps, why = unseen_decomposition(results, episodes)
+    lines = _split_table(table)
     fps = sorted(set(summ.fail_prob))
     detail = ["| method | split | " + " | ".join(f"fail {f:g}" for f in fps) + " |", "|---|---|" + "---|" * len(fps)]
     for (method, split), d in summ.groupby(["method", "split"], sort=False):
@@ -755,7 +783,8 @@ HEADLINE_SPLITS = ("heldout", "minigrid", "drawn")  # the unseen-layout splits i
 #                                                     the report)
 
 
-def headline_metrics(summ: pd.DataFrame, unseen: pd.DataFrame | None = None) -> dict:
+def headline_metrics(summ: pd.DataFrame, unseen: pd.DataFrame | None = None,
+                     experiments: dict[str, pd.DataFrame] | None = None) -> dict:
     """The few numbers `dvc metrics show` and `dvc exp show` compare by default (the per-cell tables stay in
     ``results/`` and ``metrics/summary.csv``): per split (each paper env, each unseen-layout split) every method's
     success and HNSDT's steps / optimum, each the mean over the failure probabilities of the mean over seeds.
@@ -768,6 +797,8 @@ def headline_metrics(summ: pd.DataFrame, unseen: pd.DataFrame | None = None) -> 
     splits = [(env, summ[summ.env == env], "steps_ratio") for env in dict.fromkeys(summ.env)]
     if unseen is not None:
         splits += [(split, unseen[unseen.split == split], "steps_ratio_mean") for split in HEADLINE_SPLITS]
+    for name, d in (experiments or {}).items():  # further experiments: their held-out maps
+        splits.append((f"{name}.heldout", d[d.split == "heldout"], "steps_ratio_mean"))
     out = {}
     for name, d, ratio_column in splits:
         if len(d):
@@ -780,8 +811,9 @@ def headline_metrics(summ: pd.DataFrame, unseen: pd.DataFrame | None = None) -> 
 
 def write_report(params: Params, results: Path, out: Path, lock_path: str | Path = "dvc.lock",
                  generalisation: Path | None = None, headline: Path | None = None,
-                 ablations: Path | None = None) -> Path:
+                 ablations: Path | None = None, experiments: Path | None = None) -> Path:
     """``generalisation``: the unseen-layout experiment's results folder (its section is left out without one);
+    ``experiments``: the folder of the further ones (``unseen_experiments``: each in ``experiments``/NAME);
     ``headline``: where to write :func:`headline_metrics` as JSON; ``ablations``: the measured variants of that
     experiment (:mod:`hnsdt.evaluation.ablations`; its table and scaling figure are left out without one)."""
     summary_path = results / "summary.csv"
@@ -823,6 +855,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             if not ablations.is_file():
                 raise FileNotFoundError(f"{ablations}: no measured variants (benchmarks/generalisation.py --record)")
             variants = ablation_context(ablations, tmp / "figures" / "scaling.png")
+        further = experiment_contexts(params, experiments) if experiments is not None and unseen else []
         envs, methods = sorted(set(summ.env)), sorted(set(summ.method))
         rev, digest = git_revision(), params_digest(params)
         recorded = episodes[episodes.rrd != ""]
@@ -843,7 +876,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             seeds_table=seed_lines(view), solved=f"{SOLVED:.0%}", bootstrap=f"{BOOTSTRAP:,}", usage=usage,
             numbers=_table(numbers), recorded=len(recorded),
             example_episode=recorded.episode_id.iloc[0] if len(recorded) else "",
-            generalisation=bool(unseen), **unseen, **variants)
+            generalisation=bool(unseen), **unseen, **variants, experiments=further)
         (tmp / "report.md").write_text(text)
         theorem_data = {**theorem_data, "claims": claim_rows} if claim_rows else theorem_data
         if paper_claim_rows and arms:
@@ -856,6 +889,8 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             from hnsdt.core.fileio import atomic_file
 
             unseen_summary = pd.read_csv(generalisation / "summary.csv") if generalisation is not None else None
+            further_summaries = {e["name"]: pd.read_csv(e["results"]) for e in further}
             with atomic_file(headline) as tmp_headline:
-                tmp_headline.write_text(json.dumps(headline_metrics(summ, unseen_summary), indent=2) + "\n")
+                tmp_headline.write_text(json.dumps(headline_metrics(summ, unseen_summary, further_summaries),
+                                                   indent=2) + "\n")
     return out / "report.md"
