@@ -53,11 +53,19 @@ def results_table(summary: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
+def _split_label(split: str) -> str:
+    """A headline key's column title: a paper env, an unseen-layout split, or ``<experiment>.<split>``."""
+    if "." in split:  # a further unseen-layout experiment's (unseen_experiments.<name>)
+        name, split = split.split(".", 1)
+        return f"{SPLITS.get(split, split)} ({name})"
+    return CASES.get(split, SPLITS.get(split, split))
+
+
 def headline_table(headline: dict) -> str:
     """Success per method (rows) and split (columns), and HNSDT's steps / optimum, from the headline metrics."""
     splits = list(headline)
     methods = [m for m in METHODS if any(m in headline[s] for s in splits)]
-    lines = ["| method | " + " | ".join(CASES.get(s, SPLITS.get(s, s)) for s in splits) + " |",
+    lines = ["| method | " + " | ".join(_split_label(s) for s in splits) + " |",
              "|---|" + "---|" * len(splits)]
     for method in methods:
         cells = [f"{headline[s][method]:.3f}" if headline[s].get(method) is not None else "–" for s in splits]

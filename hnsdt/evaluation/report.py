@@ -734,7 +734,8 @@ def experiment_contexts(params: Params, folder: Path) -> list[dict]:
                                     f"(run `dvc repro unseen_experiment@{name}`)")
         g = unseen_experiment(params, name).generalisation
         summ = pd.read_csv(results / "summary.csv")
-        out.append({"name": name, "changes": ", ".join(f"`{k}: {v}`" for k, v in changes.items()),
+        written = {k: v if isinstance(v, str) else json.dumps(v) for k, v in changes.items()}  # as in YAML
+        out.append({"name": name, "changes": ", ".join(f"`{k}: {v}`" for k, v in written.items()),
                     "family": g.family, "train": g.train_layouts, "seeds": int(summ.seeds.max()),
                     "operators": layout_executor(unseen_experiment(params, name), PROPOSED).operators,
                     "results": str(results / "summary.csv"), "table": "\n".join(_split_table(generalisation_table(summ))),
