@@ -202,16 +202,15 @@ def _open_in_rerun(rrds: list[Path]) -> None:
 def cmd_generalisation(args) -> None:
     """The unseen-layout experiment's stages (hnsdt.generalisation): collect, train one method, evaluate."""
     from hnsdt.core import stages
-    from hnsdt.core.config import compute_settings, load_params
+    from hnsdt.core.config import compute_settings, load_params, unseen_experiment
 
-    drawn = []
-    if args.drawn:  # a folder of the user's maps in place of generalisation.drawn's
+    params = unseen_experiment(load_params(args.params), args.experiment)  # (an unknown name: one line)
+    if args.drawn:  # a folder of the user's maps in place of the experiment's drawn maps
         if args.action != "evaluate":
             raise ValueError("--drawn is an option of generalisation evaluate")
-        drawn = ["generalisation.drawn=" + json.dumps({"folder": args.drawn, "max_steps": args.drawn_max_steps})]
-    from hnsdt.core.config import unseen_experiment
-
-    params = unseen_experiment(load_params(args.params, drawn), args.experiment)
+        section = f"unseen_experiments.{args.experiment}" if args.experiment else "generalisation"
+        drawn = [f"{section}.drawn=" + json.dumps({"folder": args.drawn, "max_steps": args.drawn_max_steps})]
+        params = unseen_experiment(load_params(args.params, drawn), args.experiment)
     params.need("generalisation")  # "missing key generalisation" before any work
     if args.action == "collect":
         stages.collect_unseen(params, Path(args.out), progress=not args.quiet)

@@ -12,6 +12,7 @@ from hnsdt.envs import KeyDoorVectorEnv, LayoutError, load_layout
 from hnsdt.envs.generate import FAMILIES, FamilySizes, check_usable, generate, write_layout
 from hnsdt.core import stages
 from hnsdt.core.params import validate
+from conftest import hnsdt_cli
 from hnsdt.envs.observation import (DOOR_CLOSED, DOOR_OPEN, EXIT, FLOOR, ITEM, KEY, OUTSIDE, WALL, full_view,
                                     local_view)
 
@@ -812,6 +813,11 @@ def test_a_further_experiment_is_a_params_block_of_the_keys_it_changes(tmp_path)
     assert {s.split for s in splits} == {"train", "heldout"} and {s.layout.n_flags for s in splits} == {6}
     with pytest.raises(ParamsError, match=r"unseen_experiments: no experiment 'three'; expected one of \['two_keys'\]"):
         unseen_experiment(base, "three")
+    (tmp_path / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))  # the command says the same
+    out = hnsdt_cli("generalisation", "evaluate", "--experiment", "three", "--drawn", tmp_path, "--out", "res",
+                    cwd=tmp_path)
+    assert out.returncode == 2 and out.stderr.strip().endswith("no experiment 'three'; expected one of ['two_keys']")
+    assert not (tmp_path / "res").exists()
     for changes, words in (({"familly": "keydoor"}, "unseen_experiments: two_keys.familly: not a generalisation key"),
                            ({"max_steps": "long"}, "unseen_experiments: two_keys.max_steps: Input should be a valid "
                                                    "integer")):
