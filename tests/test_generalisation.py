@@ -818,7 +818,10 @@ def test_a_further_experiment_is_a_params_block_of_the_keys_it_changes(tmp_path)
                     cwd=tmp_path)
     assert out.returncode == 2 and out.stderr.strip().endswith("no experiment 'three'; expected one of ['two_keys']")
     assert not (tmp_path / "res").exists()
+    assert mine.generalisation.baselines == [] and base.generalisation.baselines  # decision transformers only
     for changes, words in (({"familly": "keydoor"}, "unseen_experiments: two_keys.familly: not a generalisation key"),
+                           ({"baselines": ["gru"]}, "unseen_experiments: two_keys.baselines: a further experiment "
+                                                    "runs decision transformers only"),
                            ({"max_steps": "long"}, "unseen_experiments: two_keys.max_steps: Input should be a valid "
                                                    "integer")):
         params["unseen_experiments"] = {"two_keys": changes}

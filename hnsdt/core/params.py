@@ -266,7 +266,8 @@ class Params(Section):
     generalisation: GeneralisationParams | None = None
     unseen_experiments: dict[Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$")], dict[str, Any]] = Field(
         default_factory=dict, description="further unseen-layout experiments: per name, the `generalisation` keys "
-        "it changes (each one stage, unseen_experiment@<name>, outputs under generalisation/experiments/<name>)")
+        "it changes (each one stage, unseen_experiment@<name>, outputs under generalisation/experiments/<name>; "
+        "its decision transformers beside the symbolic reference, no baselines)")
 
     @field_validator("unseen_experiments")
     @classmethod
@@ -303,10 +304,15 @@ SECTIONS = tuple(Params.model_fields)
 
 
 def merged_experiment(base: GeneralisationParams, name: str, changes: dict) -> GeneralisationParams:
-    """The section of the unseen-layout experiment ``name``: ``base`` with ``changes`` (its keys) in place; a
-    bad key or value is one line naming ``<name>.<key>``."""
+    """The section of the unseen-layout experiment ``name``: ``base`` with ``changes`` (its keys) in place, and no
+    baselines — a further experiment runs its decision transformers beside the symbolic reference, so that its stage
+    depends on their knobs alone (a baseline's knob never reruns it); a bad key or value is one line naming
+    ``<name>.<key>``."""
+    if changes.get("baselines"):
+        raise ValueError(f"{name}.baselines: a further experiment runs decision transformers only (`methods`); "
+                         "the baselines run in the generalisation section's experiment")
     try:
-        return GeneralisationParams.model_validate({**base.model_dump(), **changes})
+        return GeneralisationParams.model_validate({**base.model_dump(), **changes, "baselines": []})
     except ValidationError as e:
         err = e.errors()[0]
         key = ".".join(str(part) for part in (name, *err["loc"]))
