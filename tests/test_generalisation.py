@@ -828,7 +828,7 @@ def test_a_further_experiment_is_a_params_block_of_the_keys_it_changes(tmp_path)
         with pytest.raises(ParamsError, match=words):
             validate(params)
     params["unseen_experiments"] = {"Two keys": {}}
-    with pytest.raises(ParamsError, match="String should match pattern"):
+    with pytest.raises(ParamsError, match=r"^params: unseen_experiments: 'Two keys': an experiment's name is lower-case"):
         validate(params)
 
 

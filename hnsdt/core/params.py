@@ -9,6 +9,7 @@ config dataclasses their registry entries name (:mod:`hnsdt.core.methods`), chec
 
 from __future__ import annotations
 
+import re
 from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
@@ -264,7 +265,7 @@ class Params(Section):
     compute: ComputeParams = ComputeParams()
     theorems: TheoremsParams | None = None
     generalisation: GeneralisationParams | None = None
-    unseen_experiments: dict[Annotated[str, Field(pattern=r"^[a-z][a-z0-9_]*$")], dict[str, Any]] = Field(
+    unseen_experiments: dict[str, dict[str, Any]] = Field(
         default_factory=dict, description="further unseen-layout experiments: per name, the `generalisation` keys "
         "it changes (each one stage, unseen_experiment@<name>, outputs under generalisation/experiments/<name>; "
         "its decision transformers beside the symbolic reference, no baselines)")
@@ -276,6 +277,8 @@ class Params(Section):
         if value and base is None:
             raise ValueError("needs the generalisation section (each experiment changes some of its keys)")
         for name, changes in value.items():
+            if not re.fullmatch(r"[a-z][a-z0-9_]*", name):  # (a DVC stage name and a folder name)
+                raise ValueError(f"{name!r}: an experiment's name is lower-case letters, digits and _")
             merged_experiment(base, name, changes)
         return value
 
