@@ -723,7 +723,8 @@ def _split_table(table: pd.DataFrame) -> list[str]:
 
 def experiment_contexts(params: Params, folder: Path) -> list[dict]:
     """The report's lines of each experiment of ``unseen_experiments``, from ``folder``/NAME/results: what it
-    changes, its table (:func:`_split_table`) and HNSDT against the target (:func:`target_lines`)."""
+    changes, its table (:func:`_split_table`) and HNSDT against the target (:func:`target_lines`); ``summary``
+    holds its summary table (the headline's line)."""
     from hnsdt.core.config import layout_executor, unseen_experiment
 
     out = []
@@ -732,14 +733,14 @@ def experiment_contexts(params: Params, folder: Path) -> list[dict]:
         if not (results / "summary.csv").is_file():
             raise FileNotFoundError(f"{results / 'summary.csv'}: no results of the unseen-layout experiment {name} "
                                     f"(run `dvc repro unseen_experiment@{name}`)")
-        g = unseen_experiment(params, name).generalisation
+        mine = unseen_experiment(params, name)
         summ = pd.read_csv(results / "summary.csv")
         written = {k: v if isinstance(v, str) else json.dumps(v) for k, v in changes.items()}  # as in YAML
         out.append({"name": name, "changes": ", ".join(f"`{k}: {v}`" for k, v in written.items()),
-                    "family": g.family, "train": g.train_layouts, "seeds": int(summ.seeds.max()),
-                    "operators": layout_executor(unseen_experiment(params, name), PROPOSED).operators,
+                    "family": mine.generalisation.family, "train": mine.generalisation.train_layouts,
+                    "seeds": int(summ.seeds.max()), "operators": layout_executor(mine, PROPOSED).operators,
                     "results": str(results / "summary.csv"), "table": "\n".join(_split_table(generalisation_table(summ))),
-                    "targets": target_lines(summ)})
+                    "targets": target_lines(summ), "summary": summ})
     return out
 
 
@@ -890,7 +891,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             from hnsdt.core.fileio import atomic_file
 
             unseen_summary = pd.read_csv(generalisation / "summary.csv") if generalisation is not None else None
-            further_summaries = {e["name"]: pd.read_csv(e["results"]) for e in further}
+            further_summaries = {e["name"]: e["summary"] for e in further}
             with atomic_file(headline) as tmp_headline:
                 tmp_headline.write_text(json.dumps(headline_metrics(summ, unseen_summary, further_summaries),
                                                    indent=2) + "\n")
