@@ -5,7 +5,8 @@ Each configuration runs in a fresh process: a decision transformer (L3, d128, co
 formulation the pipeline trains: 32 episodes of 40 steps a batch) trained 30 steps on a fixed random batch
 stream, and option-critic trained 6,000 env steps on Case 1. It prints the hash of each model's weights and the
 time per step, then the throughput of one (100 x 128) . (128 x 512) product on one thread, torch's ``F.linear``
-(MKL) against the DT's ``hnsdt.models.kernels.linear`` (NumPy's OpenBLAS). A row whose hash differs from the
+(MKL) against ``hnsdt.models.kernels.linear`` (NumPy's OpenBLAS), which computes the DT's and the Q-networks'
+products since the MKL and oneDNN rows stopped mattering to them (2026-12-01). A row whose hash differs from the
 first row's shows a setting that a different machine (another ISA, another vendor's MKL path, another BLAS core
 type, another core count) would change; the last rows are what ``hnsdt/core/reproducible.py`` pins.
 """
@@ -81,7 +82,7 @@ CONFIGS = [
     ("DNNL_MAX_CPU_ISA=AVX2", {"DNNL_MAX_CPU_ISA": "AVX2"}),
     ("MKL_CBWR=AUTO (MKL's reproducible mode, ISA still chosen per CPU)", {"MKL_CBWR": "AUTO"}),
     ("MKL_CBWR=COMPATIBLE", {"MKL_CBWR": "COMPATIBLE"}),
-    ("OPENBLAS_CORETYPE=Haswell (NumPy's BLAS: the DT's linear layers)", {"OPENBLAS_CORETYPE": "Haswell"}),
+    ("OPENBLAS_CORETYPE=Haswell (NumPy's BLAS: the networks' products)", {"OPENBLAS_CORETYPE": "Haswell"}),
     ("OMP_NUM_THREADS=1", {"OMP_NUM_THREADS": "1"}),
     ("pinned (hnsdt/core/reproducible.py)", PINNED_CPU),
     ("pinned, second process", PINNED_CPU),

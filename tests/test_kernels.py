@@ -1,4 +1,4 @@
-"""The decision transformer's linear layers on NumPy's OpenBLAS (hnsdt/models/kernels.py)."""
+"""The learned networks' products on NumPy's OpenBLAS, and GELU off oneDNN (hnsdt/models/kernels.py)."""
 
 import os
 import subprocess
@@ -8,7 +8,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from hnsdt.models.kernels import blas_core, linear
+from hnsdt.models.kernels import attention, blas_core, gelu, linear, matmul
 
 
 @pytest.mark.parametrize("shape", [(7, 16), (3, 5, 16), (1, 16), (2, 0, 16)])
@@ -70,3 +70,82 @@ def test_native_mode_drops_the_kernel_pins_but_keeps_one_blas_thread(monkeypatch
     assert pinned_environment() == ALWAYS and ALWAYS["OPENBLAS_NUM_THREADS"] == "1"
     monkeypatch.delenv("HNSDT_CPU")
     assert pinned_environment() == ALWAYS | PINNED_CPU and PINNED_CPU["OPENBLAS_CORETYPE"] == "Haswell"
+
+
+def test_matmul_attention_and_gelu_are_torchs_forward_and_backward():
+    torch.manual_seed(0)
+    q, k, v = (torch.randn(2, 4, 5, 8, requires_grad=True) for _ in range(3))
+    mask = torch.zeros(5, 5).masked_fill(torch.ones(5, 5, dtype=torch.bool).triu(1), float("-inf"))
+
+    def both(f, g, inputs):
+        ours = f(*inputs)
+        ours.square().sum().backward()
+        grads = [t.grad.clone() for t in inputs]
+        for t in inputs:
+            t.grad = None
+        theirs = g(*inputs)
+        theirs.square().sum().backward()
+        torch.testing.assert_close(ours, theirs)
+        for mine, torchs in zip(grads, [t.grad for t in inputs]):
+            torch.testing.assert_close(mine, torchs)
+        for t in inputs:
+            t.grad = None
+
+    both(matmul, torch.matmul, (q, k.detach().transpose(-1, -2).requires_grad_()))
+    both(lambda *t: attention(*t, mask), lambda *t: F.scaled_dot_product_attention(*t, attn_mask=mask), (q, k, v))
+    both(gelu, F.gelu, (q,))
+    with torch.no_grad():
+        assert not matmul(q, k.transpose(-1, -2)).requires_grad
+
+
+def test_matmul_gradients_are_exact_derivatives():
+    torch.manual_seed(0)
+    a, b = (torch.randn(*s, dtype=torch.float64, requires_grad=True) for s in ((3, 4, 6), (3, 6, 2)))
+    assert torch.autograd.gradcheck(matmul, (a, b))
+
+
+TRAIN_A_FEW_STEPS = """
+import hashlib, numpy as np, torch
+import hnsdt
+from hnsdt.baselines.dqn import DQNConfig, train_dqn
+from hnsdt.envs import load_layout
+from hnsdt.models.dt import DecisionTransformer, DTConfig
+from hnsdt.models.qnetwork import QNetworkConfig
+torch.manual_seed(0)
+g = np.random.default_rng(0)
+dt = DecisionTransformer(DTConfig("subgoal", 1, 5, 5, context=4, n_layers=2, d_model=32, n_heads=2,
+                                  formulation="episode"))
+opt = torch.optim.Adam(dt.parameters(), 1e-3)
+B, T = 4, 9
+for _ in range(3):
+    st = np.stack([g.integers(0, 5, (B, T)), g.integers(0, 5, (B, T)), g.integers(0, 2, (B, T))], -1)
+    batch = dict(states=torch.from_numpy(st), actions=torch.from_numpy(g.integers(0, 5, (B, T))),
+                 timesteps=torch.from_numpy(np.tile(np.arange(T), (B, 1))),
+                 subgoal_ids=torch.from_numpy(g.integers(0, 3, (B, T))),
+                 subgoal_targets=torch.from_numpy(g.integers(-1, 5, (B, T, 2))),
+                 loss_mask=torch.ones(B, T, dtype=torch.bool))
+    loss = dt.loss(batch)
+    opt.zero_grad()
+    loss.backward()
+    opt.step()
+lay = load_layout("keydoor_5x5")
+q, _, _ = train_dqn(lay, 50, QNetworkConfig(lay.n_flags, *lay.shape),
+                    DQNConfig(env_steps=400, learning_starts=200, batch_size=16, seed=0), progress=False)
+h = hashlib.sha256()
+for model in (dt, q):
+    for t in model.state_dict().values():
+        h.update(t.numpy().tobytes())
+print(h.hexdigest())
+"""
+
+
+def test_the_networks_bytes_do_not_follow_what_mkl_or_onednn_are_told():
+    # MKL's COMPATIBLE mode still trained other weights on an AMD EPYC than on an Intel Xeon, and GELU ran on
+    # oneDNN's ISA-dependent code: neither may reach a transformer's or a Q-network's bytes any more
+    digests = set()
+    for mkl, onednn in [("COMPATIBLE", "AVX2"), ("AUTO", "AVX512_CORE_AMX")]:
+        env = dict(os.environ, MKL_CBWR=mkl, DNNL_MAX_CPU_ISA=onednn)
+        out = subprocess.run([sys.executable, "-c", TRAIN_A_FEW_STEPS], env=env, capture_output=True, text=True)
+        assert out.returncode == 0, out.stderr[-2000:]
+        digests.add(out.stdout.split()[-1])
+    assert len(digests) == 1

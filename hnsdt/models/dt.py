@@ -47,7 +47,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from hnsdt.envs.dynamics import N_ACTIONS  # the world's actions (the Actions enum), the head's outputs
-from hnsdt.models.kernels import linear
+from hnsdt.models.kernels import Linear, attention, gelu, linear
 from hnsdt.models.network import Network
 from hnsdt.models.windows import FORMULATIONS
 from hnsdt.symbolic.subgoals import VOCAB_SIZE
@@ -115,14 +115,14 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
             self.target_row_emb = nn.Embedding(cfg.grid_h + 1, d)  # index 0 = no target
             self.target_col_emb = nn.Embedding(cfg.grid_w + 1, d)
         elif cfg.condition == "return":
-            self.return_proj = nn.Linear(1, d)
+            self.return_proj = Linear(1, d)
         self.type_emb = nn.Embedding(3, d)  # state, action, condition: the model tells token kinds apart
         self.pad_emb = nn.Parameter(torch.zeros(d))
         layer = nn.TransformerEncoderLayer(d, cfg.n_heads, 4 * d, cfg.dropout, activation="gelu",
                                            batch_first=True, norm_first=True)
         self.blocks = nn.TransformerEncoder(layer, cfg.n_layers, enable_nested_tensor=False)
         self.norm = nn.LayerNorm(d)
-        self.head = nn.Linear(d, N_ACTIONS)
+        self.head = Linear(d, N_ACTIONS)
         self.drop = nn.Dropout(cfg.dropout)
         self.register_buffer("causal_mask", nn.Transformer.generate_square_subsequent_mask(cfg.seq_len),
                              persistent=False)
@@ -134,7 +134,7 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         cfg = self.cfg
         self.row_emb = nn.Embedding(cfg.grid_h, width)
         self.col_emb = nn.Embedding(cfg.grid_w, width)
-        self.flag_proj = nn.Linear(max(cfg.n_flags, 1), width, bias=False)
+        self.flag_proj = Linear(max(cfg.n_flags, 1), width, bias=False)
 
     def embed_states(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
         """(…, d_model) of states; ``targets`` (each step's absolute sub-goal target, -1: none) is there for a
@@ -274,8 +274,7 @@ def banded_attention(q, k, v, context: int, dropout_p: float = 0.0) -> torch.Ten
         q, k, v = (F.pad(t, (0, 0, 0, blocks * context - T)) for t in (q, k, v))
     q, k, v = (t.view(B, H, blocks, context, d) for t in (q, k, v))
     k, v = (torch.cat([F.pad(t[:, :, :-1], (0, 0, 0, 0, 1, 0)), t], dim=3) for t in (k, v))  # (previous, own)
-    out = F.scaled_dot_product_attention(q, k, v, attn_mask=_block_mask(blocks, context, q.device),
-                                         dropout_p=dropout_p)
+    out = attention(q, k, v, _block_mask(blocks, context, q.device), dropout_p)
     return out.reshape(B, H, blocks * context, d)[:, :, :T]
 
 
@@ -299,7 +298,7 @@ def _qkv(layer: nn.TransformerEncoderLayer, x) -> torch.Tensor:
 
 def _feed_forward(layer: nn.TransformerEncoderLayer, x) -> torch.Tensor:
     """The pre-norm layer's second half, residual included (its dropouts act in training mode only)."""
-    hidden = layer.dropout(layer.activation(_apply(layer.linear1, layer.norm2(x))))
+    hidden = layer.dropout(gelu(_apply(layer.linear1, layer.norm2(x))))  # the layer's activation
     return x + layer.dropout2(_apply(layer.linear2, hidden))
 
 
@@ -343,5 +342,5 @@ def cached_layer(layer: nn.TransformerEncoderLayer, x, keys, values, rows, slot,
     keys[rows, :, slot], values[rows, :, slot] = k, v
     if n < len(keys):  # some episodes are done: gather the live ones (all of them: the cache as it is)
         keys, values = keys[rows], values[rows]
-    out = F.scaled_dot_product_attention(q[:, :, None], keys, values, attn_mask=mask)
+    out = attention(q[:, :, None], keys, values, mask)
     return _feed_forward(layer, x + _apply(layer.self_attn.out_proj, out.reshape(n, d)))

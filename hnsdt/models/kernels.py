@@ -1,16 +1,20 @@
-"""The decision transformer's matrix products on a BLAS kernel that is pinned by name, not by vendor.
+"""The learned networks' matrix products, and the one activation oneDNN computed, on kernels pinned by name, not by
+vendor.
 
-Why: a model's bytes depend on the GEMM kernel that computed it. torch's CPU GEMMs are MKL's, which dispatches by
+Why: a model's bytes depend on the kernels that computed it. torch's CPU GEMMs are MKL's, which dispatches by
 vendor and ISA, so the pipeline pins them to ``MKL_CBWR=COMPATIBLE`` (:mod:`hnsdt.core.reproducible`): SSE2
 code — on the Intel Xeon of this project 11–14 GMAC/s on a (100 × 128) · (128 × 512) product on one thread,
-against 55–63 for MKL's native kernels; the decision transformers' training and acting spend most of their
-time there. NumPy's OpenBLAS picks its kernels by core type, and ``OPENBLAS_CORETYPE=Haswell`` (pinned beside
-MKL's setting) runs the same AVX2/FMA kernels with the same blocking on any x86-64 CPU that has AVX2, Intel or
-AMD: 21–28 GMAC/s on that product, about 2× the pinned MKL (``benchmarks/cpu_determinism.py``, two pinned
-processes; a one-off timing of the product alone gave 9 against 34).
+against 55–63 for MKL's native kernels — and even so an AMD EPYC and an Intel Xeon trained other weights from the
+same seeds (docs/reproducibility.md). NumPy's OpenBLAS picks its kernels by core type, and
+``OPENBLAS_CORETYPE=Haswell`` (pinned beside MKL's setting) runs the same AVX2/FMA kernels with the same blocking on
+any x86-64 CPU that has AVX2, Intel or AMD: 21–28 GMAC/s on that product, about 2× the pinned MKL
+(``benchmarks/cpu_determinism.py``). torch's GELU runs on oneDNN's JIT code, chosen by ISA.
 
-:func:`linear` is ``F.linear`` computed there, forward and backward (an autograd function), for CPU tensors;
-other devices keep torch's kernels. Same numbers up to rounding (tested); the bytes are OpenBLAS's.
+:func:`linear` (and :class:`Linear`, an ``nn.Linear`` computed by it), :func:`matmul` and :func:`attention` are
+torch's products computed there, forward and backward (autograd functions), for CPU tensors; :func:`gelu` is the
+exact GELU from torch's own ``erf``. Other devices keep torch's kernels. Same numbers up to rounding (tested); the
+bytes are OpenBLAS's and torch's vectorised kernels' (``ATEN_CPU_CAPABILITY``), none MKL's or oneDNN's: a model
+built from these parts trains the same bytes whatever MKL or oneDNN is asked to do (tested).
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ from functools import lru_cache
 
 import numpy as np
 import torch
+import torch.nn as nn
 import torch.nn.functional as F
 
 
@@ -85,3 +90,52 @@ def linear(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None = No
     if torch.is_grad_enabled() and any(t is not None and t.requires_grad for t in (x, weight, bias)):
         return _Linear.apply(x, weight, bias)
     return _forward(x, weight, bias)  # (acting: no autograd node to build)
+
+
+class Linear(nn.Linear):
+    """``nn.Linear`` (the same parameters and state dict) whose product is :func:`linear`."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return linear(x, self.weight, self.bias)
+
+
+def _array(t: torch.Tensor) -> np.ndarray:
+    return t.detach().contiguous().numpy()
+
+
+class _MatMul(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, a, b):
+        ctx.save_for_backward(a, b)
+        return torch.from_numpy(np.matmul(_array(a), _array(b)))
+
+    @staticmethod
+    def backward(ctx, grad):
+        a, b = ctx.saved_tensors
+        g = _array(grad)
+        grad_a = torch.from_numpy(np.matmul(g, _array(b).swapaxes(-1, -2))) if ctx.needs_input_grad[0] else None
+        grad_b = torch.from_numpy(np.matmul(_array(a).swapaxes(-1, -2), g)) if ctx.needs_input_grad[1] else None
+        return grad_a, grad_b
+
+
+def matmul(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """``a @ b`` of (…, m, k) and (…, k, n) float tensors of one batch shape, on OpenBLAS for CPU tensors."""
+    if a.device.type != "cpu":
+        return a @ b
+    check_blas_core()
+    if torch.is_grad_enabled() and (a.requires_grad or b.requires_grad):
+        return _MatMul.apply(a, b)
+    return torch.from_numpy(np.matmul(_array(a), _array(b)))
+
+
+def attention(q, k, v, mask: torch.Tensor, dropout_p: float = 0.0) -> torch.Tensor:
+    """``F.scaled_dot_product_attention(q, k, v, attn_mask=mask, dropout_p=dropout_p)`` (``mask`` additive), its
+    two products on :func:`matmul`."""
+    weights = torch.softmax(matmul(q, k.transpose(-1, -2)) * q.shape[-1] ** -0.5 + mask, dim=-1)
+    return matmul(F.dropout(weights, dropout_p) if dropout_p > 0 else weights, v)
+
+
+def gelu(x: torch.Tensor) -> torch.Tensor:
+    """``F.gelu(x)`` (the exact, erf form) from torch's own ``erf``: ``F.gelu`` itself runs oneDNN's JIT kernel,
+    whose bytes follow the ISA oneDNN picks."""
+    return x * 0.5 * (1.0 + torch.erf(x * 0.7071067811865476))

@@ -13,6 +13,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from hnsdt.envs.dynamics import N_ACTIONS
+from hnsdt.models.kernels import Linear
 from hnsdt.models.network import Network
 
 
@@ -25,7 +26,7 @@ def encode_states(states: torch.Tensor, grid_h: int, grid_w: int) -> torch.Tenso
 def mlp(n_in: int, hidden: int, n_layers: int) -> nn.Sequential:
     layers, width = [], n_in
     for _ in range(n_layers):
-        layers += [nn.Linear(width, hidden), nn.ReLU()]
+        layers += [Linear(width, hidden), nn.ReLU()]
         width = hidden
     return nn.Sequential(*layers)
 
@@ -56,7 +57,7 @@ class QNetwork(StateFeatures, Network, arch="q_network", config=QNetworkConfig):
     def __init__(self, cfg: QNetworkConfig):
         super().__init__(cfg)
         self.body = mlp(self.n_inputs(cfg), cfg.hidden, cfg.n_layers)
-        self.head = nn.Linear(cfg.hidden, N_ACTIONS)
+        self.head = Linear(cfg.hidden, N_ACTIONS)
 
     def forward(self, states: torch.Tensor) -> torch.Tensor:
         """Q-values (B, 5)."""
@@ -80,9 +81,9 @@ class OptionCritic(StateFeatures, Network, arch="option_critic", config=OptionCr
     def __init__(self, cfg: OptionCriticConfig):
         super().__init__(cfg)
         self.body = mlp(self.n_inputs(cfg), cfg.hidden, cfg.n_layers)
-        self.q_head = nn.Linear(cfg.hidden, cfg.n_options)
-        self.termination_head = nn.Linear(cfg.hidden, cfg.n_options)
-        self.policy_head = nn.Linear(cfg.hidden, cfg.n_options * N_ACTIONS)
+        self.q_head = Linear(cfg.hidden, cfg.n_options)
+        self.termination_head = Linear(cfg.hidden, cfg.n_options)
+        self.policy_head = Linear(cfg.hidden, cfg.n_options * N_ACTIONS)
 
     def forward(self, states: torch.Tensor):
         """Q_Ω (B, K), β (B, K) in (0, 1), policy logits (B, K, 5)."""

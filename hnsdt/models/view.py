@@ -26,6 +26,7 @@ import torch.nn.functional as F
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.observation import N_CODES, view_states
 from hnsdt.models.dt import DecisionTransformer, DTConfig
+from hnsdt.models.kernels import Linear
 from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig, QNetwork, QNetworkConfig
 from hnsdt.models.recurrent import RecurrentConfig, RecurrentPolicy
 
@@ -96,10 +97,10 @@ class ViewEncoder(nn.Module):
         self.plan = None
         if value_iterations:
             self.plan = ValueIteration(channels, value_iterations, value_channels)
-            self.view_proj = nn.Linear(9 * channels + self.plan.out_features, width)
+            self.view_proj = Linear(9 * channels + self.plan.out_features, width)
         else:
-            self.view_proj = nn.Linear((2 * radius + 1) ** 2 * channels, width)
-        self.flag_proj = nn.Linear(max(n_flags, 1), width, bias=False)
+            self.view_proj = Linear((2 * radius + 1) ** 2 * channels, width)
+        self.flag_proj = Linear(max(n_flags, 1), width, bias=False)
 
     def forward(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
         """``targets`` (…, 3), read only with value iterations: the target's row and column offset from the
