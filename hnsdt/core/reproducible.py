@@ -1,7 +1,6 @@
-"""Same seed, same bytes — on one machine, and across the x86-64 machines measured before the decision
-transformers' linear layers moved to OpenBLAS (an AMD EPYC and a machine without AVX-512; an Intel Xeon with
-AVX-512-FP16 still gave other model bytes; the OpenBLAS kernels are not yet measured across CPUs:
-docs/reproducibility.md).
+"""Same seed, same bytes — on one machine, and across x86-64 machines as far as measured (docs/reproducibility.md:
+an AMD EPYC and a machine without AVX-512 gave the same bytes; an Intel Xeon gave other ones while MKL and oneDNN
+still computed parts of the networks, which since 907d602 only the LSTM and GRU baselines' recurrent layers do).
 
 Seeding fixes the random streams; the numerics still depend on which kernels the CPU runs. Measured with
 ``benchmarks/cpu_determinism.py`` (a DT and an option-critic trained for a few steps, weights hashed), each of
@@ -11,10 +10,11 @@ these alone changes the trained bytes, so each is pinned for every process of th
   pick AVX-512 where the CPU has it and AVX2 where it does not;
 * ``MKL_CBWR=COMPATIBLE`` — MKL's conditional numerical reproducibility. MKL dispatches its GEMMs by vendor
   and ISA; per Intel's documentation only ``COMPATIBLE`` (SSE2 without approximate reciprocals) gives the
-  same results on Intel and AMD processors alike (``AVX2`` is silently ignored on AMD);
-* ``DNNL_MAX_CPU_ISA=AVX2`` — oneDNN's JIT kernels (used by torch for some matmuls) likewise;
-* ``OPENBLAS_CORETYPE=Haswell`` — NumPy's OpenBLAS, which computes the decision transformers' linear layers
-  (:mod:`hnsdt.models.kernels`: about 2× MKL's ``COMPATIBLE`` code's throughput), picks its kernels by core type,
+  same results on Intel and AMD processors alike (``AVX2`` is silently ignored on AMD) — measured not
+  to hold, so only the LSTM and GRU still compute there;
+* ``DNNL_MAX_CPU_ISA=AVX2`` — oneDNN's JIT kernels (torch's GELU until 907d602; convolutions) likewise;
+* ``OPENBLAS_CORETYPE=Haswell`` — NumPy's OpenBLAS, which computes the decision transformers' and Q-networks'
+  products (:mod:`hnsdt.models.kernels`: about 2× MKL's ``COMPATIBLE`` code's throughput), picks its kernels by core type,
   not vendor: pinned to its AVX2/FMA kernels, which every machine of this project has (on one thread, always:
   :data:`ALWAYS`);
 * ``OMP_NUM_THREADS=2`` — parallel reductions split work by thread count: the machines of this project have 2
