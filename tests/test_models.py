@@ -206,6 +206,40 @@ def test_cached_steps_compute_what_the_whole_episode_pass_computes(condition):
     assert torch.allclose(got, full, atol=1e-5)
 
 
+def test_copies_with_one_history_are_computed_once_and_act_as_if_alone():
+    """Acting with the cache, copies whose histories are identical so far share one computation (a cell's
+    copies at fail_prob 0; at others until an action fails): the model sees one row per distinct history, and
+    every copy acts as it does alone — when copies part ways, a copy dies and its row is reused."""
+    from hnsdt.agents.dt_agents import CachedContext
+
+    cfg = _cfg("none", formulation="episode")
+    torch.manual_seed(0)
+    model = DecisionTransformer(cfg).eval()
+    T, base = 11, _episode(cfg, B=1, T=11)["states"][0].numpy()
+    other = _episode(cfg, B=3, T=11, seed=1)["states"].numpy()
+    parts = {0: None, 1: (3, 0), 2: (6, 1), 3: (0, 2), 4: None, 5: (3, 0)}  # copy: (step it parts at, its way)
+    states = np.stack([base if way is None else np.concatenate([base[:way[0]], other[way[1], way[0]:]])
+                       for way in parts.values()])  # (6, T, 4): 1 and 5 part together, 3 from the start
+    lives = np.array([T, T, T, T, 5, T])  # copy 4 ends after 5 steps
+    seen = []  # (cache rows, logits) of every call of the model
+    step = model.step
+    model.step = lambda cache, rows, *a, **k: seen.append((rows, step(cache, rows, *a, **k))) or seen[-1][1]
+    together, alone = CachedContext(model, states[:, 0]), [CachedContext(model, states[i:i + 1, 0]) for i in range(6)]
+    for t in range(T):
+        rows = np.flatnonzero(lives > t)
+        got = together.decide(rows)
+        cache_rows, logits = seen[-1]
+        assert len(cache_rows) == len({states[i, :t + 1].tobytes() for i in rows})  # one per distinct history
+        for i, a in zip(rows, got):
+            mine = logits[int(torch.searchsorted(cache_rows, int(together.row[i])))]
+            assert a == alone[i].decide(np.array([0]))[0], f"copy {i} at step {t}"
+            assert torch.allclose(mine, seen[-1][1][0], atol=1e-6), f"copy {i} at step {t}"
+            alone[i].observe(np.array([0]), np.array([a]), states[i:i + 1, min(t + 1, T - 1)])
+        actions = np.zeros(6, dtype=np.int64)
+        actions[rows] = got
+        together.observe(rows, actions, states[:, min(t + 1, T - 1)])
+
+
 @pytest.mark.parametrize("T", [1, 4, 7, 8, 23, 24])
 def test_banded_attention_block_by_block_is_the_band_masked_attention(T):
     """Attention cut into blocks of h (each block's queries against its own and the previous block's keys)

@@ -23,11 +23,6 @@ ANNOTATIONS = rr.AnnotationContext([rr.AnnotationInfo(id=i, label=LABELS.get(nam
                                     for i, name in CLASSES.items()])
 
 
-def _agent(state: np.ndarray, cell_px: int = CELL_PX) -> rr.Points2D:
-    centre = [(int(state[1]) + 0.5) * cell_px, (int(state[0]) + 0.5) * cell_px]  # (x, y)
-    return rr.Points2D([centre], radii=0.35 * cell_px, class_ids=[CLASS_ID["agent"]])
-
-
 def recording_properties(rec: EpisodeRecord) -> dict:
     """What the recording is: its episode id, outcome and the record's metadata (method, env, fail_prob,
     seed, git revision, params digest ... as the caller gave them)."""
@@ -94,11 +89,17 @@ def _log_episode(stream: rr.RecordingStream, tmp: Path, rec: EpisodeRecord, epis
     stream.log("plan", rr.TextDocument(_plan_markdown(rec), media_type=rr.MediaType.MARKDOWN), static=True)
     stream.set_time("episode", sequence=episode_index)
     states = rec.states[: rec.length + 1]  # with the state after the last action, when recorded
-    for t, state in enumerate(states):
-        stream.set_time("step", sequence=t)
-        stream.log("grid/cells", rr.SegmentationImage(cell_classes(rec.layout, state, CELL_PX)))
-        stream.log("grid/agent", _agent(state))
-    # per-step series in one call each (rows on the `episode` and `step` timelines)
+    # every series in one call each (rows on the `episode` and `step` timelines): the cells and the agent of
+    # every state, the final one included
+    cells = np.stack([cell_classes(rec.layout, state, CELL_PX) for state in states])
+    fmt = rr.components.ImageFormat(width=cells.shape[2], height=cells.shape[1], channel_datatype="U8")
+    stream.send_columns("grid/cells", indexes=_times(episode_index, range(len(states))),
+                        columns=rr.SegmentationImage.columns(buffer=cells.reshape(len(states), -1),
+                                                             format=[fmt] * len(states)))
+    centres = (states[:, [1, 0]].astype(np.float32) + 0.5) * CELL_PX  # (x, y)
+    stream.send_columns("grid/agent", indexes=_times(episode_index, range(len(states))),
+                        columns=rr.Points2D.columns(positions=centres, radii=np.full(len(states), 0.35 * CELL_PX),
+                                                    class_ids=np.full(len(states), CLASS_ID["agent"])))
     times = _times(episode_index, range(rec.length))
     rewards = np.asarray(rec.rewards, dtype=np.float64)
     stream.send_columns("reward/step", indexes=times, columns=rr.Scalars.columns(scalars=rewards))

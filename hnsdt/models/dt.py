@@ -320,7 +320,8 @@ class StepCache:
         cfg = model.cfg
         device = next(model.parameters()).device
         shape = (n, cfg.n_heads, cfg.context, cfg.d_model // cfg.n_heads)
-        self.keys = [torch.zeros(shape, device=device) for _ in range(cfg.n_layers)]
+        transposed = (n, cfg.n_heads, cfg.d_model // cfg.n_heads, cfg.context)  # keys as the product reads them
+        self.keys = [torch.zeros(transposed, device=device) for _ in range(cfg.n_layers)]
         self.values = [torch.zeros(shape, device=device) for _ in range(cfg.n_layers)]
         self.seen = torch.zeros(n, dtype=torch.long, device=device)  # steps each episode has put in the cache
         self.context = cfg.context
@@ -332,15 +333,22 @@ class StepCache:
         valid = torch.arange(self.context, device=t.device)[None, :] <= t[:, None]  # filled slots, this one too
         return t % self.context, valid
 
+    def copy_rows(self, src: torch.Tensor, dst: torch.Tensor) -> None:
+        """Rows ``dst`` become copies of rows ``src``: episodes that shared a history part ways."""
+        for cached in (*self.keys, *self.values):
+            cached[dst] = cached[src]
+        self.seen[dst] = self.seen[src]
+
 
 def cached_layer(layer: nn.TransformerEncoderLayer, x, keys, values, rows, slot, mask) -> torch.Tensor:
     """One pre-norm encoder layer (eval mode) on one new token per row, its key and value written into the
     cache: the same computation as ``layer`` on the whole sequence under :func:`band_mask`. ``rows``: the
-    cache rows of ``x``, sorted and distinct; ``mask``: additive, (n, 1, 1, h)."""
+    cache rows of ``x``, sorted and distinct; ``mask``: additive, (n, 1, 1, h); ``keys`` transposed
+    ((N, heads, d / heads, h): the attention's product reads them so, without a copy)."""
     n, d = x.shape
     q, k, v = _qkv(layer, x).unbind(1)  # (n, heads, d / heads) each
-    keys[rows, :, slot], values[rows, :, slot] = k, v
-    if n < len(keys):  # some episodes are done: gather the live ones (all of them: the cache as it is)
-        keys, values = keys[rows], values[rows]
-    out = attention(q[:, :, None], keys, values, mask)
+    keys[rows, :, :, slot], values[rows, :, slot] = k, v
+    if n < len(keys):  # some rows are idle: read the first n if they are the live ones, else gather them
+        keys, values = (keys[:n], values[:n]) if int(rows[-1]) == n - 1 else (keys[rows], values[rows])
+    out = attention(q[:, :, None], keys.transpose(-1, -2), values, mask)
     return _feed_forward(layer, x + _apply(layer.self_attn.out_proj, out.reshape(n, d)))
