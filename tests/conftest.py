@@ -40,7 +40,7 @@ from hnsdt.envs import load_layout  # noqa: E402
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-AFTER_THE_PIPELINE_RUN = {"test_pipeline_resume.py"}  # files that copy the shared tiny pipeline run (below)
+AFTER_THE_PIPELINE_RUN = {"test_pipeline_resume.py", "test_pipeline_use.py"}  # files that copy the shared tiny pipeline run (below)
 
 
 def pytest_collection_modifyitems(items):

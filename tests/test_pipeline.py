@@ -12,36 +12,18 @@ import pandas as pd
 import pytest
 import yaml
 
-from hnsdt.core.methods import LEARNED, METHODS
+from hnsdt.core.methods import METHODS
 from conftest import hnsdt_cli
-from tiny_repo import ENV, GIT_TRACKED_OUTS, REPO, ran_stages, run
+from tiny_repo import GIT_TRACKED_OUTS, REPO, STAGES, UNSEEN, changed_stages, ran_stages, run
 
 pytestmark = pytest.mark.slow  # (pytest-xdist runs a file on one worker, in order: `--dist loadfile`)
-STAGES = {m: METHODS[m].stage for m in LEARNED}  # learned method -> its DVC stage
 _UNSEEN = yaml.safe_load((REPO / "params.yaml").read_text())["generalisation"]  # the unseen-layout experiment
-UNSEEN = _UNSEEN["methods"] + _UNSEEN["baselines"]
 EXPERIMENTS = list(yaml.safe_load((REPO / "params.yaml").read_text()).get("unseen_experiments", {}))[:1]  # further
 # ones: the tiny params keep the first (tiny_repo.tiny_params)
 UNSEEN_STAGES = {"collect_generalisation", "evaluate_generalisation"} | {
     f"train_generalisation@{m}" for m in _UNSEEN["methods"]} | {
     f"train_generalisation_baselines@{m}" for m in _UNSEEN["baselines"]} | {
     f"unseen_experiment@{name}" for name in EXPERIMENTS}
-
-
-def _set(repo: Path, section: str, key: str, value) -> None:
-    params = yaml.safe_load((repo / "params.yaml").read_text())
-    node = params
-    for part in section.split("."):
-        node = node[part]
-    node[key] = value
-    (repo / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
-
-
-def _changed_stages(repo: Path) -> set[str]:
-    """The stages `dvc status` finds changed: their own code, params or inputs (not yet their upstream's)."""
-    out = subprocess.run(["dvc", "status", "--json"], cwd=repo, env=ENV, capture_output=True, text=True)
-    assert out.returncode == 0, out.stderr
-    return set(json.loads(out.stdout))
 
 
 def _imports_by_stage(log: str) -> dict[str, set[str]]:
@@ -147,11 +129,11 @@ def test_every_stage_depends_on_the_code_it_runs(repo_copy, first_run):
     original = module.read_bytes()
     module.write_bytes(original + b"\n# edited\n")
     try:
-        changed = _changed_stages(repo_copy)
+        changed = changed_stages(repo_copy)
     finally:
         module.write_bytes(original)
     assert readers <= changed and "train_online@keydoor-dqn" not in changed
-    assert _changed_stages(repo_copy) == set()
+    assert changed_stages(repo_copy) == set()
 
 
 def test_replay_points_to_an_evaluated_episode(repo_copy):
@@ -165,44 +147,6 @@ def test_replay_points_to_an_evaluated_episode(repo_copy):
     opened = cell.stdout.splitlines()[-1]
     assert opened.startswith("open with: rerun ") and opened.count(".rrd") == len(METHODS)
     assert "foxglove_layout.json" in opened
-
-
-def test_the_trained_models_run_on_a_folder_of_a_users_maps(tmp_path, repo_copy, first_run):
-    """`hnsdt generalisation evaluate --drawn FOLDER`: the pipeline's trained models on maps a user drew, as the
-    split `drawn` beside the others (the pipeline's outputs untouched)."""
-    (tmp_path / "mine").mkdir()
-    (tmp_path / "mine/long_corridor.txt").write_text("@.........a\n#########A#\nG..........\n")
-    before = (repo_copy / "generalisation/results/summary.csv").read_bytes()
-    out = hnsdt_cli("generalisation", "evaluate", "--drawn", tmp_path / "mine", "--out", tmp_path / "results",
-                    "--quiet", cwd=repo_copy)
-    assert out.returncode == 0, out.stderr
-    episodes = pd.read_csv(tmp_path / "results/episodes.csv")
-    drawn = episodes[episodes.split == "drawn"]
-    assert set(drawn.layout) == {str(tmp_path / "mine/long_corridor.txt")}
-    assert set(drawn.method) == set(UNSEEN) | {"symbolic"} and drawn[drawn.method == "symbolic"].success.all()
-    assert (repo_copy / "generalisation/results/summary.csv").read_bytes() == before
-
-
-def test_a_changed_knob_reruns_only_the_stages_that_read_it(repo_copy, first_run):
-    # the README's compare-two-runs workflow: an experiment with one changed knob beside the committed run
-    run(["git", "add", "-A"], repo_copy)  # dvc.lock and the outputs kept in git (the rest: DVC's .gitignore)
-    run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "the first run"], repo_copy)
-    ran = ran_stages(run(["dvc", "exp", "run", "-S", "evaluate.episodes=5"], repo_copy))
-    assert ran == {"evaluate", "report"}
-    table = run(["dvc", "exp", "show", "--only-changed", "--no-pager"], repo_copy, env={"COLUMNS": "120"})
-    assert "evaluate.episodes" in table and "…" not in table, table  # readable: nothing elided
-    assert all(len(line) <= 120 for line in table.splitlines()), table
-    diff = run(["dvc", "exp", "diff", "HEAD"], repo_copy)  # the experiment's params and metrics against HEAD
-    assert "evaluate.episodes" in diff and all(len(line) <= 120 for line in diff.splitlines()), diff
-    params = (repo_copy / "params.yaml").read_text()
-
-    _set(repo_copy, "baselines.dqn", "lr", 0.001)  # one method's knob: only its instances retrain
-    assert _changed_stages(repo_copy) == {"train_online@keydoor-dqn", "train_generalisation_baselines@dqn"}
-    (repo_copy / "params.yaml").write_text(params)
-
-    _set(repo_copy, "envs.keydoor", "max_steps", 60)  # one env's knob: everything on that env
-    assert _changed_stages(repo_copy) == {"collect@keydoor", "evaluate"} | {
-        f"{STAGES[m]}@keydoor-{m}" for m in STAGES}
 
 
 def test_the_lock_file_holds_exactly_the_pipelines_stages():

@@ -13,9 +13,14 @@ from pathlib import Path
 
 import yaml
 
+from hnsdt.core.methods import LEARNED, METHODS
+
 REPO = Path(__file__).resolve().parent.parent
 BIN = Path(sys.executable).parent
 ENV = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")  # DVC from the venv; logs as they happen
+STAGES = {m: METHODS[m].stage for m in LEARNED}  # learned method of the paper protocol -> its DVC stage
+_GENERALISATION = yaml.safe_load((REPO / "params.yaml").read_text())["generalisation"]
+UNSEEN = _GENERALISATION["methods"] + _GENERALISATION["baselines"]  # learned methods of the unseen-layout experiment
 GIT_TRACKED_OUTS = {"metrics/summary.csv", "metrics/metrics.json", "metrics/headline.json"}  # outputs with
 # `cache: false`: in git, and changed by a run with other params
 
@@ -79,6 +84,13 @@ def make_tiny_repo(dst: Path, tiny: bool = True) -> Path:
     run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "copy",
          "--date=2026-01-01T00:00:00Z"], dst, env={"GIT_COMMITTER_DATE": "2026-01-01T00:00:00Z"})  # same sha each time
     return dst
+
+
+def changed_stages(repo: Path) -> set[str]:
+    """The stages `dvc status` finds changed: their own code, params or inputs (not yet their upstream's)."""
+    out = subprocess.run(["dvc", "status", "--json"], cwd=repo, env=ENV, capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    return set(json.loads(out.stdout))
 
 
 def ran_stages(log: str) -> set[str]:

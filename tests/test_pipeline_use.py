@@ -1,0 +1,62 @@
+"""A user's work on the tiny pipeline's run: the trained models on a folder of their own maps, and an
+experiment with one changed knob beside the committed run. On a copy of the run shared with test_pipeline.py
+(conftest's ``pipeline_run``), in a file of its own so that a second pytest-xdist worker runs these while the
+first finishes test_pipeline.py."""
+
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+
+from conftest import hnsdt_cli
+from tiny_repo import STAGES, UNSEEN, changed_stages, ran_stages, run
+
+pytestmark = pytest.mark.slow
+
+
+def _set(repo: Path, section: str, key: str, value) -> None:
+    params = yaml.safe_load((repo / "params.yaml").read_text())
+    node = params
+    for part in section.split("."):
+        node = node[part]
+    node[key] = value
+    (repo / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
+
+
+def test_the_trained_models_run_on_a_folder_of_a_users_maps(tmp_path, repo_copy, first_run):
+    """`hnsdt generalisation evaluate --drawn FOLDER`: the pipeline's trained models on maps a user drew, as the
+    split `drawn` beside the others (the pipeline's outputs untouched)."""
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine/long_corridor.txt").write_text("@.........a\n#########A#\nG..........\n")
+    before = (repo_copy / "generalisation/results/summary.csv").read_bytes()
+    out = hnsdt_cli("generalisation", "evaluate", "--drawn", tmp_path / "mine", "--out", tmp_path / "results",
+                    "--quiet", cwd=repo_copy)
+    assert out.returncode == 0, out.stderr
+    episodes = pd.read_csv(tmp_path / "results/episodes.csv")
+    drawn = episodes[episodes.split == "drawn"]
+    assert set(drawn.layout) == {str(tmp_path / "mine/long_corridor.txt")}
+    assert set(drawn.method) == set(UNSEEN) | {"symbolic"} and drawn[drawn.method == "symbolic"].success.all()
+    assert (repo_copy / "generalisation/results/summary.csv").read_bytes() == before
+
+
+def test_a_changed_knob_reruns_only_the_stages_that_read_it(repo_copy, first_run):
+    # the README's compare-two-runs workflow: an experiment with one changed knob beside the committed run
+    run(["git", "add", "-A"], repo_copy)  # dvc.lock and the outputs kept in git (the rest: DVC's .gitignore)
+    run(["git", "-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "the first run"], repo_copy)
+    ran = ran_stages(run(["dvc", "exp", "run", "-S", "evaluate.episodes=5"], repo_copy))
+    assert ran == {"evaluate", "report"}
+    table = run(["dvc", "exp", "show", "--only-changed", "--no-pager"], repo_copy, env={"COLUMNS": "120"})
+    assert "evaluate.episodes" in table and "…" not in table, table  # readable: nothing elided
+    assert all(len(line) <= 120 for line in table.splitlines()), table
+    diff = run(["dvc", "exp", "diff", "HEAD"], repo_copy)  # the experiment's params and metrics against HEAD
+    assert "evaluate.episodes" in diff and all(len(line) <= 120 for line in diff.splitlines()), diff
+    params = (repo_copy / "params.yaml").read_text()
+
+    _set(repo_copy, "baselines.dqn", "lr", 0.001)  # one method's knob: only its instances retrain
+    assert changed_stages(repo_copy) == {"train_online@keydoor-dqn", "train_generalisation_baselines@dqn"}
+    (repo_copy / "params.yaml").write_text(params)
+
+    _set(repo_copy, "envs.keydoor", "max_steps", 60)  # one env's knob: everything on that env
+    assert changed_stages(repo_copy) == {"collect@keydoor", "evaluate"} | {
+        f"{STAGES[m]}@keydoor-{m}" for m in STAGES}
