@@ -18,7 +18,7 @@ from hnsdt.models.windows import frames_from_arrays
 from hnsdt.envs import KeyDoorVectorEnv, load_layout
 from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint
 from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig, QNetwork, QNetworkConfig
-from hnsdt.models.recurrent import RecurrentConfig, RecurrentPolicy
+from hnsdt.models.recurrent import START_ACTION, RecurrentConfig, RecurrentPolicy
 
 from conftest import REPO
 
@@ -164,3 +164,30 @@ def test_bad_baseline_params_give_one_clear_error(params, edit, message):
             baseline_settings(p, method, "multikeydoor", 0)
         evaluate_settings(p)
     assert message in str(err.value)
+
+
+@pytest.mark.parametrize("cell, hierarchical, layers, hidden", [("lstm", True, 3, 256), ("gru", False, 2, 128)])
+def test_acting_steps_compute_what_the_sequence_pass_computes(cell, hierarchical, layers, hidden):
+    """RecurrentPolicy.step (the gate equations on OpenBLAS, one step at a time) gives the logits of torch's
+    recurrent layer over the whole sequence; and RecurrentAgent, which computes copies with one history once,
+    acts in every copy as the sequence pass does on that copy's own history."""
+    torch.manual_seed(0)
+    model = RecurrentPolicy(RecurrentConfig(cell, n_flags=2, grid_h=5, grid_w=5, n_layers=layers, hidden=hidden,
+                                            hierarchical=hierarchical)).eval()
+    g = torch.Generator().manual_seed(1)
+    B, T = 4, 7
+    states = torch.stack([torch.randint(0, 5, (B, T), generator=g), torch.randint(0, 5, (B, T), generator=g),
+                          torch.randint(0, 2, (B, T), generator=g), torch.randint(0, 2, (B, T), generator=g)], -1)
+    prev = torch.randint(0, 6, (B, T), generator=g)
+    with torch.no_grad():
+        full, _, _ = model(states, prev)
+    state = None
+    for t in range(T):
+        logits, _, state = model.step(states[:, t], prev[:, t], state)
+        assert torch.allclose(logits, full[:, t], atol=1e-5)
+    layout = load_layout("keydoor_5x5")  # 64 copies, most of them alike for a while: each acts on its own history
+    for ep in rollout(KeyDoorVectorEnv(64, layout, 0.3, 40), RecurrentAgent(model), seed=3):
+        before = np.concatenate([[START_ACTION], ep.actions[:-1]])
+        with torch.no_grad():
+            own, _, _ = model(torch.from_numpy(ep.states[None, :-1]), torch.from_numpy(before[None]))
+        assert (own[0].argmax(-1).numpy() == ep.actions).all()

@@ -16,6 +16,7 @@ import torch
 
 from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.agents.hierarchical import HierarchicalAgent
+from hnsdt.agents.rollout import distinct_rows
 from hnsdt.envs.keydoor import PICK
 from hnsdt.envs.layout import Layout
 from hnsdt.models.dt import NO_ACTION, DecisionTransformer
@@ -49,18 +50,6 @@ class History:
     def window(self, rows: np.ndarray) -> dict[str, np.ndarray]:
         return {"states": self.states[rows], "actions": self.actions[rows], "timesteps": self.timesteps[rows],
                 "pad": self.pad[rows]}
-
-
-def distinct_rows(*arrays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(first, inverse)`` of the distinct rows of the arrays side by side (each (n, ...)): the index of each
-    distinct row's first occurrence, and of each row's distinct row. (As bytes: ``np.unique(axis=0)`` takes
-    about 30× as long on these small tables.)"""
-    n = len(arrays[0])
-    key = np.concatenate([np.ascontiguousarray(a.reshape(n, -1)).view(np.uint8).reshape(n, -1) for a in arrays],
-                         axis=1)
-    _, first, inverse = np.unique(key.view(np.dtype((np.void, key.shape[1]))).reshape(n), return_index=True,
-                                  return_inverse=True)
-    return first, inverse.reshape(n)
 
 
 def _greedy(model: DecisionTransformer, inputs: dict[str, np.ndarray]) -> np.ndarray:

@@ -120,3 +120,15 @@ def rollout(env: KeyDoorVectorEnv, agent: Agent, seed: int, start_states: np.nda
             replans=ex.replans if ex else 0, replan_counts=dict(ex.replan_counts) if ex else {},
         ))
     return episodes
+
+
+def distinct_rows(*arrays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(first, inverse)`` of the distinct rows of the arrays side by side (each (n, ...)): the index of each
+    distinct row's first occurrence, and of each row's distinct row. (As bytes: ``np.unique(axis=0)`` takes
+    about 30× as long on these small tables.)"""
+    n = len(arrays[0])
+    key = np.concatenate([np.ascontiguousarray(a.reshape(n, -1)).view(np.uint8).reshape(n, -1) for a in arrays],
+                         axis=1)
+    _, first, inverse = np.unique(key.view(np.dtype((np.void, key.shape[1]))).reshape(n), return_index=True,
+                                  return_inverse=True)
+    return first, inverse.reshape(n)

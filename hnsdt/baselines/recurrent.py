@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from hnsdt.agents.rollout import distinct_rows
+from hnsdt.envs.dynamics import PICK
 from hnsdt.models.windows import Frames
 from hnsdt.models.fit import FitState, Objective, Validation, fit
 from hnsdt.models.recurrent import START_ACTION, RecurrentConfig, RecurrentPolicy
@@ -95,34 +97,61 @@ def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTr
 
 
 class RecurrentAgent:
-    """Greedy actions of a recurrent controller; the hierarchical one also reports its chosen sub-goals."""
+    """Greedy actions of a recurrent controller (:meth:`RecurrentPolicy.step`); the hierarchical one also
+    reports its chosen sub-goals. Live copies only, and copies with identical histories so far computed once
+    (a history is its recurrent state: identical histories give identical states)."""
 
     def __init__(self, model: RecurrentPolicy, layout=None):
         self.model, self.layout = model, layout  # (a view model reads the layout around the agent)
         self.device = next(model.parameters()).device
 
     def reset(self, obs: np.ndarray) -> None:
+        n = len(obs)
         self.hidden = None
-        self.prev = np.full(len(obs), START_ACTION, dtype=np.int64)
+        self.prev = np.full(n, START_ACTION, dtype=np.int64)
+        self.history = np.zeros(n, dtype=np.int64)  # copies with one history so far share an id
+        self.live = np.ones(n, dtype=bool)
+        self.subgoal_ids = np.zeros(n, dtype=np.int64)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        states = torch.from_numpy(np.asarray(self.model.model_states(self.layout, obs), np.int64)[:, None])
-        states = states.to(self.device)
-        prev = torch.from_numpy(self.prev[:, None]).to(self.device)
-        with torch.no_grad():
-            logits, sub_logits, self.hidden = self.model(states, prev, hidden=self.hidden)
+        rows = np.flatnonzero(self.live)
+        states = np.asarray(self.model.model_states(self.layout, obs), np.int64)[rows]
+        first, inverse = distinct_rows(self.history[rows], states, self.prev[rows])
+        self.history[rows] = inverse
+        hidden = self.hidden
+        if hidden is not None:  # the first copy of each distinct history stands for its copies
+            pick = torch.from_numpy(rows[first]).to(self.device)
+            hidden = tuple(h[:, pick] for h in hidden) if isinstance(hidden, tuple) else hidden[:, pick]
+        logits, sub_logits, new = self.model.step(torch.from_numpy(states[first]).to(self.device),
+                                                  torch.from_numpy(self.prev[rows[first]]).to(self.device), hidden)
+        self.hidden = self._spread(new, rows, inverse, len(obs))
+        actions = np.full(len(obs), PICK, dtype=np.int64)  # (done copies: a harmless no-op)
+        actions[rows] = logits.argmax(-1).cpu().numpy()[inverse]
         if sub_logits is not None:
-            ids = sub_logits[:, -1].argmax(-1).cpu().numpy()
-            self.last_subgoals = (ids, np.full((len(ids), 2), -1, dtype=np.int64))
-        return logits[:, -1].argmax(-1).cpu().numpy()
+            self.subgoal_ids[rows] = sub_logits.argmax(-1).cpu().numpy()[inverse]
+            self.last_subgoals = (self.subgoal_ids.copy(), np.full((len(obs), 2), -1, dtype=np.int64))
+        return actions
+
+    def _spread(self, new, rows: np.ndarray, inverse: np.ndarray, n: int):
+        """The recurrent state of every copy: its history's, at its row; (zeros for done copies)."""
+        index = torch.from_numpy(rows).to(self.device)
+        src = torch.from_numpy(inverse).to(self.device)
+        parts = new if isinstance(new, tuple) else (new,)
+        old = self.hidden if isinstance(self.hidden, tuple) else (self.hidden,) if self.hidden is not None else None
+        out = []
+        for k, part in enumerate(parts):
+            full = old[k].clone() if old is not None else part.new_zeros(part.shape[0], n, part.shape[2])
+            full[:, index] = part[:, src]
+            out.append(full)
+        return tuple(out) if isinstance(new, tuple) else out[0]
 
     def observe(self, obs, active, actions=None, rewards=None) -> None:
         if actions is not None:
             self.prev = np.where(active, np.asarray(actions, np.int64), self.prev)
+        self.live = np.asarray(active, bool).copy()
 
     def finish(self) -> None:
         pass
-
 
 def make_agent(model: RecurrentPolicy, meta: dict, layout, executor, epsilon: float = 0.0, seed: int = 0):
     """The registry's agent factory (:mod:`hnsdt.core.methods`)."""

@@ -18,6 +18,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from hnsdt.models.dt import N_ACTIONS
+from hnsdt.models.kernels import linear
 from hnsdt.models.network import Network
 from hnsdt.symbolic.subgoals import VOCAB_SIZE
 
@@ -85,6 +86,21 @@ class RecurrentPolicy(Network, arch="recurrent", config=RecurrentConfig):
         actions = self.action_head(torch.cat([out, self.subgoal_emb(subgoals)], dim=-1))
         return actions, subgoal_logits, hidden
 
+    @torch.no_grad()
+    def step(self, states, prev_actions, hidden=None):
+        """Acting: one step of N episodes, states (N, d), prev_actions (N,); returns action logits (N, 5),
+        sub-goal logits (N, V) or None, and the recurrent state (as :meth:`forward`'s). The same numbers as
+        :meth:`forward` up to rounding (tested), every product on OpenBLAS (:func:`recurrent_step`): torch's fused
+        LSTM runs oneDNN's RNN code, whose bytes follow the CPU and which takes about 2 ms a step at a few
+        episodes."""
+        x = self.embed_states(states) + self.prev_action_emb(prev_actions)
+        out, hidden = recurrent_step(self.rnn, x, hidden)
+        if not self.cfg.hierarchical:
+            return _dense(self.action_head, out), None, hidden
+        subgoal_logits = _dense(self.subgoal_head, out)
+        subgoals = subgoal_logits.argmax(-1)
+        return _dense(self.action_head, torch.cat([out, self.subgoal_emb(subgoals)], dim=-1)), subgoal_logits, hidden
+
     def loss(self, batch: dict) -> torch.Tensor:
         """Masked cross-entropy of the actions, plus that of the sub-goals for the hierarchical controller."""
         mask = batch["mask"].reshape(-1).float()
@@ -94,3 +110,38 @@ class RecurrentPolicy(Network, arch="recurrent", config=RecurrentConfig):
             nll = nll + F.cross_entropy(sub_logits.reshape(-1, VOCAB_SIZE), batch["subgoals"].reshape(-1),
                                         reduction="none")
         return (nll * mask).sum() / mask.sum().clamp(min=1.0)
+
+
+def _dense(head: nn.Module, x: torch.Tensor) -> torch.Tensor:
+    """A head (a Linear, or a Sequential of Linear and ReLU) on :func:`kernels.linear`."""
+    for layer in (head if isinstance(head, nn.Sequential) else [head]):
+        x = linear(x, layer.weight, layer.bias) if isinstance(layer, nn.Linear) else layer(x)
+    return x
+
+
+def recurrent_step(rnn: nn.LSTM | nn.GRU, x: torch.Tensor, hidden=None):
+    """One time step of ``rnn`` (eval mode, ``batch_first``) on inputs x (N, d): ``(out (N, h), hidden)``, hidden as
+    torch's (``(h, c)`` of (layers, N, h) each for an LSTM, (layers, N, h) for a GRU; None = zeros). The gate
+    equations of torch's documentation, each product on :func:`kernels.linear`."""
+    n, lstm = len(x), isinstance(rnn, nn.LSTM)
+    zeros = torch.zeros(rnn.num_layers, n, rnn.hidden_size, dtype=x.dtype, device=x.device)
+    if hidden is None:
+        hidden = (zeros, zeros.clone()) if lstm else zeros
+    hs, cs = [], []
+    for k in range(rnn.num_layers):
+        w_ih, w_hh, b_ih, b_hh = (getattr(rnn, f"{name}_l{k}") for name in ("weight_ih", "weight_hh", "bias_ih",
+                                                                             "bias_hh"))
+        h = hidden[0][k] if lstm else hidden[k]
+        gi, gh = linear(x, w_ih, b_ih), linear(h, w_hh, b_hh)
+        if lstm:
+            i, f, g, o = (gi + gh).chunk(4, dim=1)
+            c = torch.sigmoid(f) * hidden[1][k] + torch.sigmoid(i) * torch.tanh(g)
+            x = torch.sigmoid(o) * torch.tanh(c)
+            cs.append(c)
+        else:
+            i_r, i_z, i_n = gi.chunk(3, dim=1)
+            h_r, h_z, h_n = gh.chunk(3, dim=1)
+            r, z = torch.sigmoid(i_r + h_r), torch.sigmoid(i_z + h_z)
+            x = (1 - z) * torch.tanh(i_n + r * h_n) + z * h
+        hs.append(x)  # (no dropout between layers: eval mode)
+    return x, ((torch.stack(hs), torch.stack(cs)) if lstm else torch.stack(hs))
