@@ -175,3 +175,26 @@ def test_validation_episodes_are_a_share_of_each_behaviour_never_trained_on(fram
             assert len(train.examples) + len(val.examples) == len(mixed)
         else:  # examples: episodes, their sizes their steps
             assert train.sizes.sum() == (~held).sum() and val.sizes.sum() == held.sum()
+
+
+
+def test_our_adam_steps_torchs_bytes():
+    """hnsdt.models.optim.Adam (torch's, less its compiler hooks) is torch's update to the bit, state-dict round
+    trip included (that it imports no torch._dynamo: test_kernels' child process, which starts without it)."""
+    from hnsdt.models.optim import Adam
+
+    def train(cls):
+        torch.manual_seed(0)
+        net = torch.nn.Sequential(torch.nn.Linear(3, 8), torch.nn.ReLU(), torch.nn.Linear(8, 2))
+        opt = cls(net.parameters(), lr=1e-2)
+        for i in range(12):
+            opt.zero_grad()
+            (net(torch.randn(4, 3)) ** 2).sum().backward()
+            opt.step()
+            if i == 5:
+                state = opt.state_dict()
+                opt = cls(net.parameters(), lr=1e-2)
+                opt.load_state_dict(state)
+        return torch.cat([p.detach().flatten() for p in net.parameters()])
+
+    assert torch.equal(train(Adam), train(torch.optim.Adam))

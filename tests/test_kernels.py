@@ -105,17 +105,18 @@ def test_matmul_gradients_are_exact_derivatives():
 
 
 TRAIN_A_FEW_STEPS = """
-import hashlib, numpy as np, torch
+import hashlib, sys, numpy as np, torch
 import hnsdt
 from hnsdt.baselines.dqn import DQNConfig, train_dqn
 from hnsdt.envs import load_layout
 from hnsdt.models.dt import DecisionTransformer, DTConfig
+from hnsdt.models.optim import Adam
 from hnsdt.models.qnetwork import QNetworkConfig
 torch.manual_seed(0)
 g = np.random.default_rng(0)
 dt = DecisionTransformer(DTConfig("subgoal", 1, 5, 5, context=4, n_layers=2, d_model=32, n_heads=2,
                                   formulation="episode"))
-opt = torch.optim.Adam(dt.parameters(), 1e-3)
+opt = Adam(dt.parameters(), 1e-3)
 B, T = 4, 9
 for _ in range(3):
     st = np.stack([g.integers(0, 5, (B, T)), g.integers(0, 5, (B, T)), g.integers(0, 2, (B, T))], -1)
@@ -135,17 +136,20 @@ h = hashlib.sha256()
 for model in (dt, q):
     for t in model.state_dict().values():
         h.update(t.numpy().tobytes())
-print(h.hexdigest())
+print("torch._dynamo" in sys.modules, h.hexdigest())
 """
 
 
 def test_the_networks_bytes_do_not_follow_what_mkl_or_onednn_are_told():
     # MKL's COMPATIBLE mode still trained other weights on an AMD EPYC than on an Intel Xeon, and GELU ran on
-    # oneDNN's ISA-dependent code: neither may reach a transformer's or a Q-network's bytes any more
+    # oneDNN's ISA-dependent code: neither may reach a transformer's or a Q-network's bytes any more. (The DQN's
+    # and the transformer's training imports no torch._dynamo: hnsdt.models.optim.Adam, 1.2 s per process.)
     digests = set()
     for mkl, onednn in [("COMPATIBLE", "AVX2"), ("AUTO", "AVX512_CORE_AMX")]:
         env = dict(os.environ, MKL_CBWR=mkl, DNNL_MAX_CPU_ISA=onednn)
         out = subprocess.run([sys.executable, "-c", TRAIN_A_FEW_STEPS], env=env, capture_output=True, text=True)
         assert out.returncode == 0, out.stderr[-2000:]
-        digests.add(out.stdout.split()[-1])
+        dynamo, digest = out.stdout.split()[-2:]
+        assert dynamo == "False"
+        digests.add(digest)
     assert len(digests) == 1

@@ -11,6 +11,7 @@ import torch
 
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv
+from hnsdt.models.optim import Adam
 
 
 @dataclass
@@ -177,7 +178,7 @@ def start_run(layout: Layout | list[Layout], max_steps: int, network: type, net_
     env = training_env(layout, max_steps, cfg.num_envs, cfg.fail_probs, getattr(net_cfg, "view_radius", 0))
     net = network(net_cfg).to(device)
     target = copy.deepcopy(net)
-    opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
+    opt = Adam(net.parameters(), lr=cfg.lr)
     obs, _ = env.reset(seed=cfg.seed)
     return OnlineRun(rng, device, env, net, target, opt, obs, ReplayBuffer(cfg.buffer_size, obs.shape[1], rng),
                      EpisodeStats(cfg.num_envs))

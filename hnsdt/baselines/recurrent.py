@@ -133,14 +133,15 @@ class RecurrentAgent:
         return actions
 
     def _spread(self, new, rows: np.ndarray, inverse: np.ndarray, n: int):
-        """The recurrent state of every copy: its history's, at its row; (zeros for done copies)."""
+        """The recurrent state of every copy: its history's, at its row (written into the previous state, which
+        the step read through a gather; zeros at the first step; done copies keep theirs)."""
         index = torch.from_numpy(rows).to(self.device)
         src = torch.from_numpy(inverse).to(self.device)
         parts = new if isinstance(new, tuple) else (new,)
         old = self.hidden if isinstance(self.hidden, tuple) else (self.hidden,) if self.hidden is not None else None
         out = []
         for k, part in enumerate(parts):
-            full = old[k].clone() if old is not None else part.new_zeros(part.shape[0], n, part.shape[2])
+            full = old[k] if old is not None else part.new_zeros(part.shape[0], n, part.shape[2])
             full[:, index] = part[:, src]
             out.append(full)
         return tuple(out) if isinstance(new, tuple) else out[0]
@@ -152,6 +153,7 @@ class RecurrentAgent:
 
     def finish(self) -> None:
         pass
+
 
 def make_agent(model: RecurrentPolicy, meta: dict, layout, executor, epsilon: float = 0.0, seed: int = 0):
     """The registry's agent factory (:mod:`hnsdt.core.methods`)."""

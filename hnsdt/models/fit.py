@@ -18,6 +18,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from hnsdt.models.optim import Adam
+
 
 @dataclass
 class FitState:
@@ -101,7 +103,7 @@ def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_step
     which records what it measured)."""
     torch.manual_seed(seed)
     model = network(model_cfg).to(device)
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    opt = Adam(model.parameters(), lr=lr)
     best = None
     if state is None:
         first, step, seen, recent, curve, rng = 0, 0, 0, [], [], np.random.default_rng(seed)
