@@ -1,7 +1,13 @@
 import atexit
 import os
 import shutil
+import sys
 import tempfile
+
+# pytest rewrites each test module's asserts on import and caches the result beside it (tests/__pycache__, which
+# git ignores), unless bytecode is not to be written (PYTHONDONTWRITEBYTECODE, set on some machines of this
+# kind): then every worker rewrites every module, every run — 2-4 s of each `make test-fast`. Cache it anyway.
+sys.dont_write_bytecode = False
 
 # Nothing may reach a model/dataset hub from the tests: a private, empty HF home (removed when the test process
 # ends: every pytest-xdist worker has its own) and offline mode.
@@ -41,14 +47,34 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 AFTER_THE_PIPELINE_RUN = {"test_pipeline_resume.py", "test_pipeline_use.py"}  # files that copy the shared tiny pipeline run (below)
+# the end-to-end files, whose tests build on each other's repo: each runs whole on one worker, in order; the
+# worker that runs the tiny pipeline (test_pipeline.py) resumes it too, the other one, after the rest, uses it
+END_TO_END = {"test_pipeline.py": "tiny pipeline", "test_pipeline_resume.py": "tiny pipeline",
+              "test_pipeline_use.py": "test_pipeline_use.py"}
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """How pytest-xdist hands out tests: one at a time to whichever worker is free (the fast tier splits evenly
+    over two workers), the end-to-end files as END_TO_END says (while one worker runs the tiny pipeline, the
+    other runs everything else). xdist's own `--dist loadgroup` would say this with marks, but with pytest 9 it
+    groups nothing (it renames tests through an attribute pytest no longer reads), so the scheduler is told here."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class OneTestOrEndToEndFiles(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return END_TO_END.get(os.path.basename(nodeid.split("::", 1)[0]), nodeid)
+
+    return OneTestOrEndToEndFiles(config, log)
 
 
 def pytest_collection_modifyitems(items):
-    """Files with slow (end-to-end) tests first: the workers take whole files, so the longest start at once; the
-    files that copy the tiny pipeline's run last, so that the worker that takes one finds the run done (by the
-    worker running test_pipeline.py) rather than waiting for it."""
+    """The order the workers are handed tests in (pytest_xdist_make_scheduler above; `--no-loadscope-reorder`):
+    the longest first — files with slow (end-to-end) tests, then the learning tests — so that the short ones
+    fill the gaps at the end; the files that copy the tiny pipeline's run last, so that the worker that takes
+    one finds the run done (by the worker running test_pipeline.py) rather than waiting for it."""
     slow_files = {item.path for item in items if item.get_closest_marker("slow")}
-    items.sort(key=lambda item: (item.path.name in AFTER_THE_PIPELINE_RUN, item.path not in slow_files))  # stable
+    items.sort(key=lambda item: (item.path.name in AFTER_THE_PIPELINE_RUN, item.path not in slow_files,
+                                 item.get_closest_marker("learning") is None))  # stable
 
 
 @pytest.fixture(scope="session")

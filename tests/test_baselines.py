@@ -105,20 +105,21 @@ def test_dqn_learns_case1(keydoor, params, random_success):
 @pytest.mark.learning
 def test_options_learns_to_cross_a_room(params):
     """Option-critic's learning signal: on an open 5x5 room with a 20-step horizon (uniform random actions reach
-    the far corner in about 4% of episodes), two of three seeds learn to cross it, and the three together reach
-    far more than chance; a broken learner scores about 0.02 in every seed. Not every seed: acting greedily
-    over options, a run whose training episodes all reached the exit can still fail (measured, seeds 0-7 of
-    this test: 1.0 in six, 0.065 and 0.01 in seeds 2 and 5 since the Q-network's products moved to OpenBLAS;
-    seed 5 reached 0.56 on MKL's products). Case 1 itself is not asserted: there option-critic is
-    seed-fragile (0.1-0.5 success across seeds and machines at the default budget; see the report)."""
+    the far corner in about 4% of episodes), two of three seeds learn to cross it in 10,000 env steps, and the
+    three together reach far more than chance; a broken learner scores about 0.02 in every seed. Not every
+    seed: acting greedily over options, a run whose training episodes all reached the exit can still fail
+    (measured, seeds 0-7 of this test: 1.0, 1.0, 1.0, 0.76, 0.91, 0.01, 0.91, 0.68 at 10,000 steps; at
+    16,000 1.0 in six, 0.065 and 0.01 in seeds 2 and 5; at 8,000 1.0, 0.78, 0.86 in seeds 0-2). Case 1 itself
+    is not asserted: there option-critic is seed-fragile (0.1-0.5 success across seeds and machines at the
+    default budget; see the report)."""
     room = load_layout("@....\n.....\n.....\n.....\n....G\n")
     random_success = _success(room, RandomAgent(0), horizon=20)
     settings = baseline_settings(params, "options", "keydoor", 0)
     successes = []
     for seed in range(3):
-        cfg = replace(settings.train, env_steps=16_000, learning_starts=500, seed=seed)
+        cfg = replace(settings.train, env_steps=10_000, learning_starts=500, seed=seed)
         model, curve, usage = train_options(room, 20, replace(settings.model, n_flags=room.n_flags), cfg, progress=False)
-        assert usage["env_steps"] == 16_000 and curve[-1]["success"] > curve[0]["success"]
+        assert usage["env_steps"] == 10_000 and curve[-1]["success"] > curve[0]["success"]
         successes.append(_success(room, OptionsAgent(model, seed=0), horizon=20))
     assert random_success < 0.1
     assert sum(s >= 0.8 for s in successes) >= 2 and np.mean(successes) > random_success + 0.3, successes

@@ -410,7 +410,8 @@ def network_configs(params, method: str, seed: int):
 # -- the protocol: every learned method on views, the layout pool, the dataset, the stages' functions --------
 
 def _tiny_generalisation_params(tmp_path) -> dict:
-    """The repository's params with a tiny unseen-layout experiment (as the pipeline test's tiny repo)."""
+    """The repository's params with a tiny unseen-layout experiment (as the pipeline test's tiny repo), its
+    hand-drawn split one map of a size no training layout has (the pipeline test evaluates all of them)."""
     import sys
     from pathlib import Path
 
@@ -424,7 +425,9 @@ def _tiny_generalisation_params(tmp_path) -> dict:
     tiny_params(path)
     params = yaml.safe_load(path.read_text())
     params["envs"]["keydoor"]["layout"] = str(REPO / params["envs"]["keydoor"]["layout"])
-    params["generalisation"]["drawn"]["folder"] = str(REPO / params["generalisation"]["drawn"]["folder"])
+    (tmp_path / "drawn").mkdir()
+    (tmp_path / "drawn/corridor.txt").write_text((REPO / "layouts/drawn/corridor_5x13.txt").read_text())
+    params["generalisation"]["drawn"]["folder"] = str(tmp_path / "drawn")
     return params
 
 
@@ -543,9 +546,6 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     params = _tiny_generalisation_params(tmp_path)
     g = params["generalisation"]
     g.update(methods=["hnsdt"], baselines=["gru", "dqn"], symmetries=8)  # (the DTs on turned maps)
-    (tmp_path / "drawn").mkdir()  # one hand-drawn map, of a size no training layout has
-    (tmp_path / "drawn/corridor.txt").write_text((REPO / "layouts/drawn/corridor_5x13.txt").read_text())
-    g["drawn"]["folder"] = str(tmp_path / "drawn")
     dataset = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
     for method in g["methods"] + g["baselines"]:
         (run,) = stages.plan_unseen(validate(params), method, dataset)
