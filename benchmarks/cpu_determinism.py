@@ -28,6 +28,7 @@ from hnsdt.envs import load_layout
 from hnsdt.baselines.options import OptionsConfig, train_options
 from hnsdt.models.dt import DecisionTransformer, DTConfig
 from hnsdt.models.kernels import linear
+from hnsdt.models.optim import Adam
 from hnsdt.models.qnetwork import OptionCriticConfig
 
 def digest(model):
@@ -39,7 +40,7 @@ def digest(model):
 torch.manual_seed(0)
 g = np.random.default_rng(0)
 dt = DecisionTransformer(DTConfig("subgoal", 1, 5, 5, context=10, n_layers=3, formulation="episode"))
-opt = torch.optim.Adam(dt.parameters(), 1e-3)
+opt = Adam(dt.parameters(), 1e-3)
 B, T, steps = 32, 40, 30
 t = time.perf_counter()
 for _ in range(steps):
