@@ -7,12 +7,12 @@ Writes OUT/seedK/{model.safetensors,config.json} and CURVES/seedK.csv.
 """
 
 import argparse
+import runpy
 import sys
 from pathlib import Path
 
-from hnsdt.core.reproducible import pin_process
-
-pin_process()  # same bytes on any machine: hash seed, CPU kernels, threads
+# same bytes on any machine (hash seed, CPU kernels, threads): re-run pinned before NumPy loads (as hnsdt would)
+runpy.run_path(str(Path(__file__).resolve().parents[1] / "hnsdt/core/reproducible.py"))["pin_process"]()
 
 from hnsdt.core import stages  # noqa: E402
 
