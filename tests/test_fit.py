@@ -177,7 +177,6 @@ def test_validation_episodes_are_a_share_of_each_behaviour_never_trained_on(fram
             assert train.sizes.sum() == (~held).sum() and val.sizes.sum() == held.sum()
 
 
-
 def test_our_adam_steps_torchs_bytes():
     """hnsdt.models.optim.Adam (torch's, less its compiler hooks) is torch's update to the bit, state-dict round
     trip included (that it imports no torch._dynamo: test_kernels' child process, which starts without it)."""

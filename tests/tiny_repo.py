@@ -55,8 +55,8 @@ def tiny_params(path: Path) -> None:
     params["generalisation"].update(train_layouts=3, evaluated_train_layouts=1, heldout_layouts=1, seeds=[0],
                                     episodes_per_layout=2, episodes=2, budgets={})  # the tiny knobs above
     params["generalisation"]["minigrid"] = [{"id": "MiniGrid-DoorKey-8x8-v0", "layouts": 1, "max_steps": 100}]
-    params["generalisation"]["drawn"]["max_steps"] = 150  # untrained learners walk to the limit: 150 is the
-    # shortest that every drawn map validates with (the optimum's 0.99 at fail_prob 0.2; the zigzag needs > 120)
+    params["generalisation"]["drawn"]["max_steps"] = 150  # untrained learners walk to the limit: every drawn map
+    # validates at 150 (the optimum's 0.99 at fail_prob 0.2), not at 120 (the zigzag)
     params["generalisation"]["validation_layouts"] = 1
     first = list(params.get("unseen_experiments", {}))[:1]  # one further experiment runs its stage kind
     params["unseen_experiments"] = {name: params["unseen_experiments"][name] for name in first}
