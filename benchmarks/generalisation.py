@@ -79,6 +79,7 @@ def main() -> None:
                        ("seeds", args.seeds), ("episodes", args.episodes)):
         if value is not None:
             g[key] = value
+    g["method_seeds"] = {}  # every variant's methods at the same seeds (--seeds; --set method_seeds=... to differ)
     if args.methods:  # split like params.yaml: decision transformers, then the other learned methods
         g["methods"] = [m for m in args.methods if m in DT_METHODS]
         g["baselines"] = [m for m in args.methods if m not in DT_METHODS]
@@ -103,7 +104,7 @@ def main() -> None:
             runs = stages.plan_unseen(params, method, dataset)
             train_all(runs, g["family"], tmp / "models" / method, tmp / "curves" / method, compute, progress=False)
             times[f"train {method}"] = time.perf_counter() - t0
-            kept = kept_validation(tmp / "models" / method, g["seeds"])
+            kept = kept_validation(tmp / "models" / method, params.generalisation.seeds_of(method))
             validation += validation_lines(kept, method, "")
             best[method] = mean_validation(kept)
             rounds[method] = args.relabel_rounds if args.relabel and method in DT_METHODS else 0
@@ -115,7 +116,7 @@ def main() -> None:
                 train_all(runs, g["family"], tmp / "models" / method, tmp / "curves" / method, compute,
                           progress=False)
                 times[f"train {method} round {r + 1}"] = time.perf_counter() - t0
-                kept = kept_validation(tmp / "models" / method, g["seeds"])
+                kept = kept_validation(tmp / "models" / method, params.generalisation.seeds_of(method))
                 validation += validation_lines(kept, method, f" (relabel round {r + 1})")
                 best[method] = mean_validation(kept)
         t0 = time.perf_counter()
@@ -196,7 +197,8 @@ def variant_rows(args, params, table: pd.DataFrame, best: dict, rounds: dict, da
     return table.assign(
         variant=args.record, ingredient=args.ingredient, family=g.family, train_layouts=g.train_layouts,
         episodes_per_map=2 * g.episodes_per_layout + g.random_episodes_per_layout, encoder=encoder,
-        relabel_rounds=table.method.map(rounds).fillna(0).astype(int), seeds=" ".join(map(str, g.seeds)),
+        relabel_rounds=table.method.map(rounds).fillna(0).astype(int),
+        seeds=table.method.map(lambda m: " ".join(map(str, g.seeds_of(m)))),
         validation_steps=table.method.map(best), command=shlex.join(["python", *sys.argv]),
         revision=git_revision(), params_digest=params_digest(params), dataset_digest=dataset_digest,
         cpu=cpu_name(), seconds=round(seconds))

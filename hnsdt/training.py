@@ -317,9 +317,9 @@ def _budget(params: Params, method: str, train_cfg):
 
 def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: list[Layout],
                      validation: Callable[[], list[Layout]]) -> list[TrainTask]:
-    """One task per seed of ``generalisation.seeds``: ``method``'s view network on the training ``layouts``
-    (online methods) or on their ``dataset`` (offline ones); ``validation()`` gives the layouts a budget
-    measured by acting stops on (:class:`StepsToExit`)."""
+    """One task per training seed of ``method`` (``generalisation.seeds_of``): its view network on the training
+    ``layouts`` (online methods) or on their ``dataset`` (offline ones); ``validation()`` gives the layouts a
+    budget measured by acting stops on (:class:`StepsToExit`)."""
     from hnsdt.data.frames import load_frames
 
     g = params.need("generalisation")
@@ -341,7 +341,8 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
         data = load_frames(dataset, layout_executor(params, method).operators)  # (Move: hindsight labels)
         facts = {"dataset": str(dataset), "family": g.family,
                  "target_return": float(data.returns_to_go[np.unique(data.episode_start)].max())}
-    net_cfg, train_cfg = layout_network_configs(params, method, g.seeds[0], layouts[0])
+    seeds = g.seeds_of(method)
+    net_cfg, train_cfg = layout_network_configs(params, method, seeds[0], layouts[0])
     wanted = list(getattr(train_cfg, "behaviours", ()))
     if not online and wanted and not np.isin(data.policy, wanted).any():
         raise ValueError(f"{method} learns from {wanted} episodes and {dataset} holds none; set "
@@ -355,4 +356,4 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
         raise params.error(f"generalisation.budgets.{method}.patience stops on the validation layouts: set "
                            "generalisation.validation_layouts > 0")
     return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data, facts, measure=measure)
-            for seed in g.seeds]
+            for seed in seeds]

@@ -536,7 +536,8 @@ def test_the_dataset_over_generated_layouts_stores_each_frames_view(tmp_path):
 def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp_path):
     """The stages' functions at a tiny budget: each method trains on the dataset (or the layout pool) into its
     view network, and the evaluation has one row per method x seed x layout x fail_prob x episode, each with its
-    split, the symbolic reference included, and the exact optimum's steps."""
+    split, the symbolic reference included, and the exact optimum's steps; a method with seeds of its own
+    (``method_seeds``) trains and is evaluated over those, the others over ``seeds``."""
     import pandas as pd
 
     from hnsdt.core.compute import Compute
@@ -545,21 +546,30 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
 
     params = _tiny_generalisation_params(tmp_path)
     g = params["generalisation"]
-    g.update(methods=["hnsdt"], baselines=["gru", "dqn"], symmetries=8)  # (the DTs on turned maps)
+    g.update(methods=["hnsdt"], baselines=["gru", "dqn"], symmetries=8,  # (the DTs on turned maps)
+             seeds=[0], method_seeds={"hnsdt": [0, 2], "options": [7]})  # (options: not run here, ignored)
     dataset = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
     for method in g["methods"] + g["baselines"]:
-        (run,) = stages.plan_unseen(validate(params), method, dataset)
-        model, facts, _ = train_run(run)
-        assert type(model).__name__.startswith("View")
-        save_checkpoint(model, tmp_path / "models" / method / "seed0", {"method": method, **facts})
+        runs = stages.plan_unseen(validate(params), method, dataset)
+        assert [r.seed for r in runs] == ([0, 2] if method == "hnsdt" else [0])
+        for run in runs:
+            model, facts, _ = train_run(run)
+            assert type(model).__name__.startswith("View")
+            save_checkpoint(model, tmp_path / "models" / method / f"seed{run.seed}", {"method": method, **facts})
     table = stages.evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1),
                                    progress=False)
     assert set(table.method) == {"hnsdt", "gru", "dqn", "symbolic"}
     assert set(table.split) == {"train", "heldout", "minigrid", "drawn"}
-    assert len(table) == 4 * 4 * 2 * 2
+    assert len(table) == 5 * 4 * 2 * 2
+    assert table.groupby("method").seed.unique().map(list).to_dict() == {
+        "hnsdt": [0, 2], "gru": [0], "dqn": [0], "symbolic": [0]}
     assert (table.optimal_steps > 0).all() and table[table.method == "symbolic"].success.all()
     summary = pd.read_csv(tmp_path / "results/summary.csv")
     assert len(summary) == 4 * 4 * 2 and summary.success_mean.between(0, 1).all()
+    assert summary.groupby("method").seeds.max().to_dict() == {"hnsdt": 2, "gru": 1, "dqn": 1, "symbolic": 1}
+    from hnsdt.evaluation.report import trained_seeds
+
+    assert trained_seeds(summary) == "2 seeds for HNSDT (ours), 1 for the others"
     # where the plan-followers' steps go: one row per sub-goal pursued, on every split; the controllers walk
     # shortest paths (each first action right, each walking sub-goal within its expected minimum at fail_prob 0)
     segments = pd.read_csv(tmp_path / "results/segments.csv")
@@ -819,6 +829,17 @@ def test_a_further_experiment_is_a_params_block_of_the_keys_it_changes(tmp_path)
     assert out.returncode == 2 and out.stderr.strip().endswith("no experiment 'three'; expected one of ['two_keys']")
     assert not (tmp_path / "res").exists()
     assert mine.generalisation.baselines == [] and base.generalisation.baselines  # decision transformers only
+    params["generalisation"]["method_seeds"] = {"hnsdt": [0, 1]}  # an experiment's seeds are every method's ...
+    assert unseen_experiment(validate(params), "two_keys").generalisation.seeds_of("hnsdt") == [3]
+    params["unseen_experiments"]["two_keys"].pop("seeds")  # ... and one that keeps them keeps the methods' own
+    assert unseen_experiment(validate(params), "two_keys").generalisation.seeds_of("hnsdt") == [0, 1]
+    params["generalisation"]["method_seeds"] = {"hnsdt": [1, 1]}
+    with pytest.raises(ParamsError, match=r"^params: generalisation.method_seeds: .*hnsdt: must list distinct seeds"):
+        validate(params)
+    params["generalisation"]["method_seeds"] = {"hnsdtt": [1]}
+    with pytest.raises(ParamsError, match=r"^params: generalisation.method_seeds.hnsdtt"):
+        validate(params)
+    params["generalisation"]["method_seeds"] = {}
     for changes, words in (({"familly": "keydoor"}, "unseen_experiments: two_keys.familly: not a generalisation key"),
                            ({"baselines": ["gru"]}, "unseen_experiments: two_keys.baselines: a further experiment "
                                                     "runs decision transformers only"),

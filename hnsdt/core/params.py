@@ -202,7 +202,11 @@ class GeneralisationParams(Section):
                                                "train, models.<family>)")
     baselines: list[Literal[BASELINES]] = Field(default_factory=list, description="the other learned methods "
                                                 "(knobs: baselines.<method>); the symbolic one is the reference")
-    seeds: list[int] = Field(min_length=1)
+    seeds: list[int] = Field(min_length=1, description="training seeds of every learned method (evaluation "
+                             "episodes are drawn per seed; the symbolic reference runs these)")
+    method_seeds: dict[Literal[LEARNED], list[int]] = Field(
+        default_factory=dict, description="per method, training seeds that replace `seeds` (a method not run "
+        "here is ignored; a further experiment that sets `seeds` drops them)")
     episodes: PositiveInt = Field(description="evaluation episodes per method x seed x layout x fail_prob")
     budgets: dict[Literal[LEARNED], dict[str, Any]] = Field(
         default_factory=dict, description="per method, training knobs that replace the paper protocol's here "
@@ -215,9 +219,21 @@ class GeneralisationParams(Section):
             raise ValueError(f"must not repeat an entry, got {value}")
         return value
 
+    @field_validator("method_seeds")
+    @classmethod
+    def _some_unique(cls, value):
+        for method, seeds in value.items():
+            if not seeds or len(set(seeds)) != len(seeds):
+                raise ValueError(f"{method}: must list distinct seeds, got {seeds}")
+        return value
+
     @property
     def learned(self) -> list[str]:
         return [*self.methods, *self.baselines]
+
+    def seeds_of(self, method: str) -> list[int]:
+        """The training seeds of ``method``: its ``method_seeds`` entry, else ``seeds``."""
+        return list(self.method_seeds.get(method, self.seeds))
 
 
 class LogsParams(Section):
@@ -315,7 +331,8 @@ def merged_experiment(base: GeneralisationParams, name: str, changes: dict) -> G
         raise ValueError(f"{name}.baselines: a further experiment runs decision transformers only (`methods`); "
                          "the baselines run in the generalisation section's experiment")
     try:
-        return GeneralisationParams.model_validate({**base.model_dump(), **changes, "baselines": []})
+        dropped = {"method_seeds": {}} if "seeds" in changes else {}  # (its seeds are every method's)
+        return GeneralisationParams.model_validate({**base.model_dump(), **dropped, **changes, "baselines": []})
     except ValidationError as e:
         err = e.errors()[0]
         key = ".".join(str(part) for part in (name, *err["loc"]))

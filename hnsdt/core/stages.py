@@ -128,7 +128,7 @@ def train_unseen(params: Params, method: str, dataset: Path, out: Path, curves: 
 
 
 def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progress: bool = True):
-    """Stage `evaluate_generalisation`: every method × seed on every evaluated layout (training, held-out,
+    """Stage `evaluate_generalisation`: every method × its seeds on every evaluated layout (training, held-out,
     MiniGrid, drawn), the symbolic baseline as the reference, beside the exact optimum."""
     from hnsdt import generalisation as gen
     from hnsdt.core.config import eval_epsilon, layout_executor
@@ -140,7 +140,7 @@ def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progr
     sources = tuple(gen.layout_splits(params, evaluated_only=True))
     gen.check_sources(sources, max(fps))
     methods = [*g.learned, REFERENCE]
-    table = evaluate_layouts(methods, list(g.seeds), sources, fps, g.episodes,
+    table = evaluate_layouts({m: g.seeds_of(m) for m in methods}, sources, fps, g.episodes,
                              {m: layout_executor(params, m) for m in methods},  # (generalisation.operators)
                              {m: eval_epsilon(params, m) for m in g.learned}, models, out,
                              compute or compute_settings(params), progress)

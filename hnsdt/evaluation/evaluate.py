@@ -433,10 +433,11 @@ def layout_batches(seed: int, sources: tuple, fail_probs: tuple[float, ...], epi
                  for li, src in enumerate(sources))
 
 
-def evaluate_layouts(methods: list[str], seeds: list[int], sources: tuple, fail_probs: tuple[float, ...],
+def evaluate_layouts(seeds: dict[str, list[int]], sources: tuple, fail_probs: tuple[float, ...],
                      episodes: int, executors: dict[str, ExecutorConfig], epsilons: dict[str, float],
                      models_root: str | Path, out_dir: str | Path, compute=None, progress: bool = True) -> pd.DataFrame:
-    """Every method × seed on every source, ``episodes`` per layout and fail_prob, the checkpoints of view models
+    """Every method (the keys of ``seeds``, in order) × its seeds on every source, ``episodes`` per layout and
+    fail_prob (a seed's episodes are drawn from the seed, whichever method runs them), the checkpoints of view models
     at ``models_root/<method>/seed<K>``; write ``episodes.csv``, ``summary.csv`` (:func:`layout_summary`),
     ``segments.csv`` and ``layouts.csv`` under ``out_dir``, with the exact optimum per layout and fail_prob."""
     from hnsdt.core.compute import Compute, run_tasks
@@ -445,7 +446,7 @@ def evaluate_layouts(methods: list[str], seeds: list[int], sources: tuple, fail_
     tasks = [EvalTask(method, seed, executors[method], *load_model(Path(models_root) / method / f"seed{seed}", method,
                                                                    view=True),
                       epsilons.get(method, 0.0), layout_batches(seed, sources, fail_probs, episodes), layout_rows)
-             for method in methods for seed in seeds]
+             for method, method_seeds in seeds.items() for seed in method_seeds]
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
     table = pd.DataFrame([row for batches in results for rows, _ in batches for row in rows])
     segments = pd.DataFrame([row for batches in results for _, rows in batches for row in rows])

@@ -62,6 +62,20 @@ def _label(method: str) -> str:
     return METHOD_LABELS.get(method, method)
 
 
+def trained_seeds(summ: pd.DataFrame) -> str:
+    """How many training seeds the learned methods of a summary ran: "2 seeds", or "5 seeds for HNSDT (ours),
+    2 for the others" where they differ (``generalisation.method_seeds``)."""
+    learned = summ[summ.method.map(lambda m: m not in METHODS or METHODS[m].training != "none")]
+    counts = learned.groupby("method", sort=False).seeds.max()
+    usual = int(counts.mode().max())
+    def n(k: int) -> str:
+        return f"{k} seed{'s' if k != 1 else ''}"
+
+    other = [f"{n(int(k))} for {' and '.join(_label(m) for m in ms.index)}"
+             for k, ms in counts[counts != usual].groupby(counts[counts != usual], sort=False)]
+    return ", ".join([*other, f"{usual} for the others"]) if other else n(usual)
+
+
 def _methods(summ: pd.DataFrame) -> list[str]:
     """Methods in the paper's order (by paradigm), unknown names last."""
     present = set(summ.method)
@@ -738,7 +752,7 @@ def experiment_contexts(params: Params, folder: Path) -> list[dict]:
         written = {k: v if isinstance(v, str) else json.dumps(v) for k, v in changes.items()}  # as in YAML
         out.append({"name": name, "changes": ", ".join(f"`{k}: {v}`" for k, v in written.items()),
                     "family": mine.generalisation.family, "train": mine.generalisation.train_layouts,
-                    "seeds": int(summ.seeds.max()), "operators": layout_executor(mine, PROPOSED).operators,
+                    "seeds": trained_seeds(summ), "operators": layout_executor(mine, PROPOSED).operators,
                     "results": str(results / "summary.csv"), "table": "\n".join(_split_table(generalisation_table(summ))),
                     "targets": target_lines(summ), "summary": summ})
     return out
@@ -776,7 +790,7 @@ def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
             "generalisation_radius": g.view_radius if g else "?",
             "generalisation_operators": layout_executor(params, PROPOSED).operators if g else "?",
             "generalisation_splits": [f"{SPLIT_LABELS.get(s, s)}: {n} ({sizes[s]} cells)" for s, n in counts.items()],
-            "generalisation_seeds": int(summ.seeds.max()),
+            "generalisation_seeds": trained_seeds(summ),
             "generalisation_episodes": int(episodes.groupby(["method", "seed", "layout", "fail_prob"]).size().max()),
             "generalisation_drawn": drawn_lines(episodes)}
 
