@@ -225,13 +225,16 @@ def cmd_generalisation(args) -> None:
     stages.evaluate_unseen(params, Path(args.models), Path(args.out), compute, progress=not args.quiet)
 
 
-def _compute_arguments(p: argparse.ArgumentParser) -> None:
+def _run_arguments(p: argparse.ArgumentParser, func) -> None:
+    """The tail of every command that runs tasks: --quiet, where they run, and what runs them."""
     from hnsdt.core.compute import EXECUTORS
 
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--executor", choices=EXECUTORS, help="where the runs execute (default: compute.executor); "
                    "ray connects to RAY_ADDRESS or starts a local instance. The outputs do not depend on it")
     p.add_argument("--workers", type=int, help="local executor: runs at once (default: compute.workers; 0 = "
                    "one per core)")
+    p.set_defaults(func=func)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -281,9 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", help="checkpoints folder, one seedK/ per seed (default: models/ENV/METHOD)")
     p.add_argument("--curves", help="training-curve folder, one seedK.csv per seed (default: "
                    "plots/train/ENV-METHOD)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    _compute_arguments(p)
-    p.set_defaults(func=cmd_train)
+    _run_arguments(p, cmd_train)
 
     p = sub.add_parser("dataset", help="share a collected dataset")
     dsub = p.add_subparsers(dest="dataset_command", required=True, metavar="ACTION")
@@ -302,9 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "env (default: data/datasets; read for the training segment counts of Theorem 2)")
     p.add_argument("--out", default="results", help="results folder (default: results)")
     p.add_argument("--recordings", help="episode recordings folder (default: recordings beside --out)")
-    p.add_argument("--quiet", action="store_true")
-    _compute_arguments(p)
-    p.set_defaults(func=cmd_evaluate)
+    _run_arguments(p, cmd_evaluate)
 
     p = sub.add_parser("generalisation", help="the unseen-layout experiment: collect on generated layouts, "
                        "train a method on views, evaluate on training / held-out / MiniGrid layouts (the "
@@ -323,9 +322,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "--drawn maps (default: 250)")
     p.add_argument("--experiment", help="a name of unseen_experiments in params.yaml: its changes to the "
                    "generalisation section apply")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
-    _compute_arguments(p)
-    p.set_defaults(func=cmd_generalisation)
+    _run_arguments(p, cmd_generalisation)
 
     p = sub.add_parser("report", help="figures and report.md from the evaluation (the `report` stage)")
     p.add_argument("--results", default="results")
