@@ -53,7 +53,8 @@ def tiny_params(path: Path) -> None:
         params["baselines"][method].update(env_steps=400, learning_starts=200)
     params["evaluate"].update(episodes=4, fail_probs=[0.0, 0.2])
     params["generalisation"].update(train_layouts=3, evaluated_train_layouts=1, heldout_layouts=1, seeds=[0],
-                                    method_seeds={}, episodes_per_layout=2, episodes=2, budgets={})  # the tiny knobs above
+                                    method_seeds={}, episodes_per_layout=2, episodes=2,
+                                    budgets={})  # the tiny knobs above
     params["generalisation"]["minigrid"] = [{"id": "MiniGrid-DoorKey-8x8-v0", "layouts": 1, "max_steps": 100}]
     params["generalisation"]["drawn"]["max_steps"] = 150  # untrained learners walk to the limit: every drawn map
     # validates at 150 (the optimum's 0.99 at fail_prob 0.2), not at 120 (the zigzag)

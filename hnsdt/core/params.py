@@ -221,7 +221,7 @@ class GeneralisationParams(Section):
 
     @field_validator("method_seeds")
     @classmethod
-    def _some_unique(cls, value):
+    def _distinct_seeds(cls, value):
         for method, seeds in value.items():
             if not seeds or len(set(seeds)) != len(seeds):
                 raise ValueError(f"{method}: must list distinct seeds, got {seeds}")
