@@ -59,7 +59,7 @@ def test_killed_runs_resume_to_the_same_outputs(tmp_path, repo_copy, first_run):
         assert f"Running stage '{stage}" in log_path.read_text()
         if final:
             assert not (repo / final).exists(), f"half-written {final} after a kill during {stage}"
-    again = list(reversed(KILL_POINTS))  # upstream first, in one `dvc repro` (one start-up, one lock write each)
+    again = list(reversed(KILL_POINTS))  # upstream first, in one `dvc repro` (one DVC start-up, not three)
     assert ran_stages(run(["dvc", "repro", "--force", "--single-item", *again], repo)) == set(again)
     assert not list(repo.rglob(f"{TMP_PREFIX}*")), "temporaries of killed writes were not cleaned up"
     status = run(["git", "status", "--porcelain", "--untracked-files=all"], repo).splitlines()

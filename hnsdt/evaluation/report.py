@@ -68,11 +68,12 @@ def trained_seeds(summ: pd.DataFrame) -> str:
     learned = summ[summ.method.map(lambda m: m not in METHODS or METHODS[m].training != "none")]
     counts = learned.groupby("method", sort=False).seeds.max()
     usual = int(counts.mode().max())
+
     def n(k: int) -> str:
         return f"{k} seed{'s' if k != 1 else ''}"
 
-    other = [f"{n(int(k))} for {' and '.join(_label(m) for m in ms.index)}"
-             for k, ms in counts[counts != usual].groupby(counts[counts != usual], sort=False)]
+    odd = counts[counts != usual]
+    other = [f"{n(int(k))} for {' and '.join(_label(m) for m in ms.index)}" for k, ms in odd.groupby(odd, sort=False)]
     return ", ".join([*other, f"{usual} for the others"]) if other else n(usual)
 
 
