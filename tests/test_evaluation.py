@@ -104,3 +104,39 @@ def test_the_headline_metrics_are_few_and_are_means_over_the_failure_probabiliti
     assert head["keydoor"]["hnsdt_steps_ratio"] == round(summ[(summ.env == "keydoor") & (summ.method == "hnsdt")]
                                                          .steps_ratio.mean(), 4)
     json.dumps(head, allow_nan=False)  # no NaN reaches the metrics file
+
+
+def _episode_bytes(ep) -> tuple:
+    return (ep.states.tobytes(), ep.actions.tobytes(), ep.rewards.tobytes(), ep.subgoal_ids.tobytes(),
+            ep.subgoal_targets.tobytes(), ep.success, tuple(ep.plan), ep.replans)
+
+
+@pytest.mark.parametrize("method", ["options", "hnsdt"])
+def test_a_methods_cells_stepped_as_one_batch_are_the_cells_run_alone(keydoor, method):
+    """The evaluation steps a method's fail_prob cells as one batch (cell_batches); each cell's episodes are those
+    of a batch of its own: the env's draws and the agent's (an option-critic samples actions and terminations)
+    come from the cell's own seed, and a transformer's cached decisions do not depend on what else is in the
+    batch."""
+    import torch
+
+    from hnsdt.agents.executor import ExecutorConfig
+    from hnsdt.evaluation.evaluate import Batch, EvalTask, cell_batches, cell_outputs, run_batch
+    from hnsdt.models.dt import DecisionTransformer, DTConfig
+    from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig
+
+    torch.manual_seed(0)
+    if method == "options":
+        model = OptionCritic(OptionCriticConfig(keydoor.n_flags, *keydoor.shape, hidden=16)).eval()
+    else:
+        model = DecisionTransformer(DTConfig("subgoal", keydoor.n_flags, *keydoor.shape, context=3, n_layers=1,
+                                             d_model=16, max_timestep=100, formulation="episode")).eval()
+    (batch,) = cell_batches(method, "keydoor", 0, (0.0, 0.2, 0.3), keydoor, 30, 6)
+    task = EvalTask(method, 0, ExecutorConfig(), model, {}, 0.1, (batch,), cell_outputs)
+    assert batch.copies == 18 and len(set(batch.seed)) == 3
+    together = run_batch(task, batch)
+    alone = [ep for cell, seed in zip(batch.key, batch.seed)
+             for ep in run_batch(task, Batch(keydoor, 30, 6, cell.fail_prob, seed, cell))]
+    assert [_episode_bytes(e) for e in together] == [_episode_bytes(e) for e in alone]
+    assert len({e.states.tobytes() for e in together}) > 3  # the draws matter: the episodes differ
+    rows = cell_outputs(task, batch, together)
+    assert [r[0][0]["episode_id"] for r in rows] == [f"{method}/keydoor/fp{fp:g}/seed0/ep0" for fp in (0, 0.2, 0.3)]

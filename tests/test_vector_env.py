@@ -74,3 +74,16 @@ def test_make_vec_gives_the_batched_env():
     envs = gym.make_vec("hnsdt/KeyDoor-v0", num_envs=3, vectorization_mode="vector_entry_point", fail_prob=0.1)
     obs, _ = envs.reset(seed=0)
     assert isinstance(envs, KeyDoorVectorEnv) and obs.shape == (3, 4) and envs.fail_prob == 0.1
+
+
+def test_random_streams_split_the_copies_evenly(keydoor):
+    """reset(seed=[...]): one generator per equal run of copies (the evaluation's cells stepped together)."""
+    venv = KeyDoorVectorEnv(6, keydoor, 0.3, 20)
+    venv.reset(seed=[1, 2])
+    both = np.array([venv.step(np.zeros(6, int))[0] for _ in range(10)])
+    for i, seed in enumerate((1, 2)):
+        alone = KeyDoorVectorEnv(3, keydoor, 0.3, 20)
+        alone.reset(seed=seed)
+        assert np.array_equal(both[:, 3 * i:3 * i + 3], [alone.step(np.zeros(3, int))[0] for _ in range(10)])
+    with pytest.raises(ValueError, match="5 copies do not split evenly over 2 random streams"):
+        KeyDoorVectorEnv(5, keydoor, 0.3, 20).reset(seed=[1, 2])

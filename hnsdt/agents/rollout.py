@@ -8,7 +8,7 @@ trajectories.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Protocol, runtime_checkable
+from typing import Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
@@ -78,10 +78,11 @@ class RandomAgent:
         pass
 
 
-def rollout(env: KeyDoorVectorEnv, agent: Agent, seed: int, start_states: np.ndarray | None = None,
+def rollout(env: KeyDoorVectorEnv, agent: Agent, seed: int | Sequence[int], start_states: np.ndarray | None = None,
             epsilon: float = 0.0) -> list[Episode]:
-    """One episode per copy. ``epsilon`` replaces each action by a uniform one with that probability."""
-    noise = np.random.default_rng([seed, 7919])
+    """One episode per copy. ``epsilon`` replaces each action by a uniform one with that probability. ``seed``:
+    the env's (one per equal run of copies: a sequence, :class:`hnsdt.envs.vector.Streams`)."""
+    noise = np.random.default_rng([seed, 7919] if np.ndim(seed) == 0 else [*seed, 7919])
     options = {"states": start_states} if start_states is not None else None
     obs, _ = env.reset(seed=seed, options=options)
     agent.reset(obs)

@@ -10,7 +10,7 @@ import numpy as np
 import torch
 
 from hnsdt.envs.layout import Layout
-from hnsdt.envs.vector import KeyDoorVectorEnv
+from hnsdt.envs.vector import KeyDoorVectorEnv, Streams
 from hnsdt.models.optim import Adam
 
 
@@ -185,12 +185,14 @@ def start_run(layout: Layout | list[Layout], max_steps: int, network: type, net_
 
 
 class OnlineAgent:
-    """Batched acting with a trained online learner: ``epsilon`` and a seeded generator for its randomness.
+    """Batched acting with a trained online learner: ``epsilon`` and a seeded generator for its randomness
+    (``seed``: an int, or :class:`Streams` — one generator per equal run of copies, as the env's).
     Subclasses implement ``act``; ``reset`` starts a new batch of episodes."""
 
-    def __init__(self, model: torch.nn.Module, epsilon: float = 0.0, seed: int = 0, layout: Layout | None = None):
+    def __init__(self, model: torch.nn.Module, epsilon: float = 0.0, seed: int | Streams = 0,
+                 layout: Layout | None = None):
         self.model, self.epsilon, self.layout = model, float(epsilon), layout  # (a view model reads the layout)
-        self.rng = np.random.default_rng(seed)
+        self.rng = seed if isinstance(seed, Streams) else np.random.default_rng(seed)
         self.device = next(model.parameters()).device
 
     def states(self, obs: np.ndarray) -> torch.Tensor:

@@ -6,12 +6,14 @@ Autoreset is disabled: a finished copy stays frozen (reward 0, its terminated/tr
 is reset with ``reset(options={"reset_mask": mask})``; ``done`` tells which copies have finished.
 
 Randomness: one uniform draw per copy per step from a single generator. With ``num_envs=1`` and the same seed
-this is exactly the stream :class:`KeyDoorEnv` draws, so the two produce identical trajectories.
+this is exactly the stream :class:`KeyDoorEnv` draws, so the two produce identical trajectories. ``reset(seed=[s1,
+s2, ...])`` instead gives each equal run of copies its own generator (:class:`Streams`): a batch of k cells draws,
+copy for copy, what each cell's own env would (the evaluation steps its fail_probs' cells as one batch).
 """
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
 import gymnasium as gym
 import numpy as np
@@ -22,6 +24,38 @@ from gymnasium.vector.utils import batch_space
 from hnsdt.envs.dynamics import GOAL_REWARD, N_ACTIONS, STEP_REWARD, Rules
 from hnsdt.envs.keydoor import check_env_params, observation_space_for
 from hnsdt.envs.layout import Layout, load_layout
+
+
+class Streams:
+    """Independent generators side by side: the first ``n / len(seeds)`` copies draw from the first seed's
+    generator, the next as many from the second's, and so on — each run of copies gets exactly the numbers a batch
+    of its own would. Draws are for every copy at once (``random(n)``, ``integers(low, high, n)``), as a batched
+    env or agent makes them."""
+
+    def __init__(self, seeds: Sequence[int], n: int):
+        if n % len(seeds):
+            raise ValueError(f"{n} copies do not split evenly over {len(seeds)} random streams")
+        self.generators = [seeding.np_random(int(s))[0] for s in seeds]
+        self.n, self.each = n, n // len(seeds)
+
+    def _sizes(self, size: int) -> list[int]:
+        if size != self.n:
+            raise ValueError(f"random streams for {self.n} copies asked for {size} draws")
+        return [self.each] * len(self.generators)
+
+    def random(self, size: int) -> np.ndarray:
+        return np.concatenate([g.random(k) for g, k in zip(self.generators, self._sizes(size))])
+
+    def integers(self, low: int, high: int, size: int) -> np.ndarray:
+        return np.concatenate([g.integers(low, high, k) for g, k in zip(self.generators, self._sizes(size))])
+
+
+def generator(seed: int | Sequence[int] | None, n: int) -> np.random.Generator | Streams:
+    """The random source of a batch of ``n`` copies: one generator from an int seed (or none), one per equal run
+    of copies from a sequence of seeds (:class:`Streams`)."""
+    if seed is None or np.ndim(seed) == 0:
+        return seeding.np_random(seed)[0]
+    return Streams(seed, n)
 
 
 class EpisodeClock:
@@ -73,11 +107,12 @@ class KeyDoorVectorEnv(EpisodeClock, VectorEnv):
         self.state = self.rules.initial_states(self.num_envs)
         self._start_clock(self.num_envs, max_steps)
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+    def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None):
         """Reset all copies, or those in ``options["reset_mask"]``; ``options["states"]`` (one row per reset
-        copy) starts them from given states instead of the layout's start."""
+        copy) starts them from given states instead of the layout's start. ``seed``: one generator, or one per
+        equal run of copies (a sequence, :class:`Streams`)."""
         if seed is not None:
-            self.np_random, _ = seeding.np_random(seed)
+            self.np_random = generator(seed, self.num_envs)
         options = options or {}
         mask = np.ones(self.num_envs, bool) if options.get("reset_mask") is None else np.asarray(
             options["reset_mask"], bool)
