@@ -1022,3 +1022,40 @@ def test_turned_maps_need_a_network_that_reads_views():
     params["generalisation"]["symmetries"] = 3
     with pytest.raises(ValueError, match=r"generalisation.symmetries: Input should be 1, 4 or 8"):
         validate(params)
+
+
+@pytest.mark.parametrize("method", ["hnsdt", "options", "symbolic"])
+def test_a_splits_maps_stepped_as_one_batch_are_each_map_run_alone(method):
+    """The unseen-layout evaluation steps a split's maps together (layout_batches: one run of copies per map,
+    its own env seed); each map's episodes are those of a batch of its own — the views, plans, navigators and
+    random draws (env and agent) of each copy come from its own map and seed."""
+    import torch
+
+    from hnsdt.agents.executor import ExecutorConfig
+    from hnsdt.evaluation.evaluate import Batch, EvalTask, layout_batches, layout_rows, run_batch
+    from hnsdt.generalisation import Source
+    from hnsdt.models.view import ViewDecisionTransformer, ViewOptionCritic, ViewOptionCriticConfig, view_config
+
+    layouts = [generate("keydoor_maze", s) for s in (3, 4)] + [generate("keydoor", 5)]
+    assert len({lay.shape for lay in layouts}) > 1  # maps of different sizes in one batch
+    sources = tuple(Source("heldout", lay, 40) for lay in layouts) + (Source("drawn", layouts[0], 30),)
+    torch.manual_seed(0)
+    model = {"hnsdt": lambda: ViewDecisionTransformer(view_config("subgoal", 2, 2, 7, context=3, n_layers=1, d_model=16,
+                                                                  max_timestep=100, formulation="episode")),
+             "options": lambda: ViewOptionCritic(ViewOptionCriticConfig(2, 1, 1, hidden=16)),
+             "symbolic": lambda: None}[method]()
+    batches = layout_batches(7, sources, (0.0, 0.3), 3)
+    assert [(len(b.layout), b.copies, b.max_steps) for b in batches] == [(3, 18, 40), (1, 6, 30)]
+    task = EvalTask(method, 7, ExecutorConfig(operators="move" if method == "hnsdt" else "goto"),
+                    model.eval() if model else None, {}, 0.1, batches, layout_rows)
+    for batch in batches:
+        together = run_batch(task, batch)
+        alone = [ep for k, lay in enumerate(batch.layout)
+                 for ep in run_batch(task, Batch(lay, batch.max_steps, 6, batch.fail_prob[6 * k:6 * k + 6],
+                                                 batch.seed[k], None))]
+        assert [(e.states.tobytes(), e.actions.tobytes(), e.subgoal_ids.tobytes(), tuple(e.plan)) for e in together] \
+            == [(e.states.tobytes(), e.actions.tobytes(), e.subgoal_ids.tobytes(), tuple(e.plan)) for e in alone]
+        rows, _ = layout_rows(task, batch, together)
+        assert [(r["layout"], r["fail_prob"], r["episode"]) for r in rows[:4]] == [
+            (batch.key[0][0].name, 0.0, 0), (batch.key[0][0].name, 0.0, 1), (batch.key[0][0].name, 0.0, 2),
+            (batch.key[0][0].name, 0.3, 0)]

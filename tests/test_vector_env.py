@@ -87,3 +87,17 @@ def test_random_streams_split_the_copies_evenly(keydoor):
         assert np.array_equal(both[:, 3 * i:3 * i + 3], [alone.step(np.zeros(3, int))[0] for _ in range(10)])
     with pytest.raises(ValueError, match="5 copies do not split evenly over 2 random streams"):
         KeyDoorVectorEnv(5, keydoor, 0.3, 20).reset(seed=[1, 2])
+
+
+def test_a_batch_over_several_maps_steps_each_run_on_its_own(keydoor):
+    """A tuple of layouts: one per equal run of copies, each stepped by its own map's rules."""
+    from hnsdt.envs.generate import generate
+
+    other = generate("keydoor", 3)
+    both = KeyDoorVectorEnv(4, (keydoor, other), 0.0, 20)
+    obs, _ = both.reset(seed=[1, 2])
+    assert [tuple(o[:2]) for o in obs] == [keydoor.start] * 2 + [other.start] * 2
+    with pytest.raises(ValueError, match="5 copies do not split evenly over 2 layouts"):
+        KeyDoorVectorEnv(5, (keydoor, other), 0.0, 20)
+    with pytest.raises(ValueError, match="the layouts of one batch must have the same keys, doors and items"):
+        KeyDoorVectorEnv(2, (keydoor, generate("multikeydoor", 0)), 0.0, 20)

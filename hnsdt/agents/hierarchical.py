@@ -6,19 +6,21 @@ from __future__ import annotations
 import numpy as np
 
 from hnsdt.agents.executor import ExecutorConfig, PlanExecutor
-from hnsdt.envs.layout import Layout
+from hnsdt.envs.layout import Layout, layout_runs
 
 
 class HierarchicalAgent:
     name = "hierarchical"
 
-    def __init__(self, layout: Layout, config: ExecutorConfig | None = None):
+    def __init__(self, layout: Layout | tuple[Layout, ...], config: ExecutorConfig | None = None):
         self.layout = layout
         self.config = config or ExecutorConfig()
         self.executors: list[PlanExecutor] = []
 
     def reset(self, obs: np.ndarray) -> None:
-        self.executors = [PlanExecutor(self.layout, self.config).start(o) for o in obs]
+        """One executor per copy, on its map (``layout``: one, or one per equal run of copies)."""
+        self.executors = [PlanExecutor(layout, self.config).start(o)
+                          for layout, rows in layout_runs(self.layout, len(obs)) for o in obs[rows]]
 
     def observe(self, obs: np.ndarray, active: np.ndarray, actions=None, rewards=None) -> None:
         """Update the executors of the copies that were live for the step that produced ``obs``."""

@@ -13,15 +13,16 @@ from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.agents.hierarchical import HierarchicalAgent
 from hnsdt.agents.navigation import Navigator, step_towards
 from hnsdt.envs.keydoor import PICK
-from hnsdt.envs.layout import Layout
+from hnsdt.envs.layout import Layout, layout_runs
 
 
 class SymbolicAgent(HierarchicalAgent):
-    def __init__(self, layout: Layout, config: ExecutorConfig | None = None):
+    def __init__(self, layout: Layout | tuple[Layout, ...], config: ExecutorConfig | None = None):
         super().__init__(layout, config)
-        self.navigator = Navigator(layout)
-        self._door_cols = layout.door_flags
-        self._door_bits = 1 << np.arange(len(layout.doors), dtype=np.int64)
+        first = layout if isinstance(layout, Layout) else layout[0]  # (several maps: the same keys and doors)
+        self.navigators = {lay: Navigator(lay) for lay in ([layout] if isinstance(layout, Layout) else layout)}
+        self._door_cols = first.door_flags
+        self._door_bits = 1 << np.arange(len(first.doors), dtype=np.int64)
 
     def low_level(self, obs: np.ndarray, subgoal_ids: np.ndarray, targets: np.ndarray) -> np.ndarray:
         masks = obs[:, self._door_cols] @ self._door_bits
@@ -29,8 +30,11 @@ class SymbolicAgent(HierarchicalAgent):
         if self.config.operators == "move":  # the target is a neighbour (Move) or the agent's own cell
             actions = step_towards(obs[:, :2], targets)
         else:
-            target_idx = self.navigator.target_grid[targets[:, 0], targets[:, 1]]  # (-1, -1) rows masked below
-            actions = self.navigator.controller_actions(target_idx, masks, obs[:, :2])
+            actions = np.empty(len(obs), dtype=np.int64)
+            for layout, rows in layout_runs(self.layout, len(obs)):  # each map's copies on its navigator
+                navigator = self.navigators[layout]
+                target_idx = navigator.target_grid[targets[rows, 0], targets[rows, 1]]  # (-1, -1) rows masked below
+                actions[rows] = navigator.controller_actions(target_idx, masks[rows], obs[rows, :2])
         return np.where(has_goal, actions, PICK)  # nothing to pursue (done or trapped): a harmless no-op
 
 

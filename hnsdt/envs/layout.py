@@ -185,6 +185,17 @@ def load_layout(spec: str | Path | Layout) -> Layout:
     )
 
 
+def layout_runs(layouts: Layout | tuple[Layout, ...], n: int) -> list[tuple[Layout, slice]]:
+    """``(layout, rows)`` of each equal run of ``n`` batched copies: one layout for all of them, or one per equal
+    run (a tuple: a batch over several maps, as the unseen-layout evaluation steps a split's maps together)."""
+    if isinstance(layouts, Layout):
+        return [(layouts, slice(0, n))]
+    if not layouts or n % len(layouts):
+        raise ValueError(f"{n} copies do not split evenly over {len(layouts)} layouts")
+    each = n // len(layouts)
+    return [(lay, slice(i * each, (i + 1) * each)) for i, lay in enumerate(layouts)]
+
+
 def reachable_cells(layout: Layout, origin: Cell, open_doors: set[str]) -> dict[Cell, int]:
     """Shortest move counts from ``origin`` to every cell it can reach.
 

@@ -13,7 +13,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from hnsdt.envs.layout import Layout
+from hnsdt.envs.layout import Layout, layout_runs
 
 OUTSIDE, WALL, FLOOR, EXIT, AGENT = 0, 1, 2, 3, 4
 MAX_OBJECTS = 10  # keys a..j, doors A..J, items 0..9
@@ -77,9 +77,13 @@ def local_view(layout: Layout, states: np.ndarray, radius: int) -> np.ndarray:
     return padded[np.arange(n)[:, None, None], rows[:, :, None], cols[:, None, :]]
 
 
-def view_states(layout: Layout, states: np.ndarray, radius: int) -> np.ndarray:
+def view_states(layout: Layout | tuple[Layout, ...], states: np.ndarray, radius: int) -> np.ndarray:
     """``row, col, view codes (row-major), flags`` per state: what a learner on unseen layouts reads
-    (:mod:`hnsdt.models.view`), and what a dataset over many layouts stores beside ``observation.state``."""
+    (:mod:`hnsdt.models.view`), and what a dataset over many layouts stores beside ``observation.state``.
+    ``layout``: a tuple gives each equal run of states its own (:func:`hnsdt.envs.layout.layout_runs`)."""
+    if not isinstance(layout, Layout):
+        states = np.asarray(states, dtype=np.int64)
+        return np.concatenate([view_states(lay, states[rows], radius) for lay, rows in layout_runs(layout, len(states))])
     states = np.asarray(states, dtype=np.int64).reshape(-1, layout.state_size)
     views = local_view(layout, states, radius).reshape(len(states), -1)
     return np.concatenate([states[:, :2], views, states[:, 2:]], axis=1)

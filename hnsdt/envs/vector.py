@@ -23,7 +23,7 @@ from gymnasium.vector.utils import batch_space
 
 from hnsdt.envs.dynamics import GOAL_REWARD, N_ACTIONS, STEP_REWARD, Rules
 from hnsdt.envs.keydoor import check_env_params, observation_space_for
-from hnsdt.envs.layout import Layout, load_layout
+from hnsdt.envs.layout import Layout, layout_runs, load_layout
 
 
 class Streams:
@@ -87,25 +87,35 @@ class EpisodeClock:
 class KeyDoorVectorEnv(EpisodeClock, VectorEnv):
     metadata = {"autoreset_mode": AutoresetMode.DISABLED}
 
-    def __init__(self, num_envs: int, layout: str | Layout = "keydoor_5x5", fail_prob: float | Any = 0.0,
-                 max_steps: int = 100, **_ignored: Any):
-        """``fail_prob`` is one probability for every copy, or one per copy (online learners train on a mix)."""
+    def __init__(self, num_envs: int, layout: str | Layout | tuple[Layout, ...] = "keydoor_5x5",
+                 fail_prob: float | Any = 0.0, max_steps: int = 100, **_ignored: Any):
+        """``fail_prob`` is one probability for every copy, or one per copy (online learners train on a mix).
+        ``layout``: one for every copy, or a tuple of layouts with the same flags, one per equal run of copies
+        (:func:`hnsdt.envs.layout.layout_runs`: the unseen-layout evaluation steps a split's maps together)."""
         if int(num_envs) < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         per_copy = np.broadcast_to(np.asarray(fail_prob, dtype=np.float64), (int(num_envs),))
         for p in np.unique(per_copy):
             check_env_params(p, max_steps)
-        self.layout = lay = load_layout(layout)
+        self.layout = lay = load_layout(layout) if not isinstance(layout, tuple) else layout
         self.num_envs = int(num_envs)
+        self.runs = [(Rules(one), rows) for one, rows in layout_runs(lay, self.num_envs)]
+        if len({rules.layout.state_size for rules, _ in self.runs}) > 1:
+            raise ValueError("the layouts of one batch must have the same keys, doors and items")
         self.fail_prob = float(per_copy[0]) if np.ndim(fail_prob) == 0 else per_copy.copy()
-        self.single_observation_space = observation_space_for(lay)
+        shapes = np.array([rules.layout.shape for rules, _ in self.runs])
+        self.single_observation_space = gym.spaces.MultiDiscrete(  # (several maps: rows and cols of the largest)
+            list(shapes.max(axis=0)) + list(observation_space_for(self.runs[0][0].layout).nvec[2:]), dtype=np.int64)
         self.single_action_space = gym.spaces.Discrete(N_ACTIONS)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.rules = Rules(lay)
+        self.rules = self.runs[0][0] if len(self.runs) == 1 else None  # (one layout: its rules)
         self.np_random, _ = seeding.np_random(None)
-        self.state = self.rules.initial_states(self.num_envs)
+        self.state = self._initial_states()
         self._start_clock(self.num_envs, max_steps)
+
+    def _initial_states(self) -> np.ndarray:
+        return np.concatenate([rules.initial_states(rows.stop - rows.start) for rules, rows in self.runs])
 
     def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None):
         """Reset all copies, or those in ``options["reset_mask"]``; ``options["states"]`` (one row per reset
@@ -117,14 +127,20 @@ class KeyDoorVectorEnv(EpisodeClock, VectorEnv):
         mask = np.ones(self.num_envs, bool) if options.get("reset_mask") is None else np.asarray(
             options["reset_mask"], bool)
         n = int(mask.sum())
-        fresh = self.rules.initial_states(n)
+        fresh = self._initial_states()[mask]
         if options.get("states") is not None:
             states = np.asarray(options["states"], dtype=np.int64).reshape(n, -1)
             nvec = self.single_observation_space.nvec
             if states.shape != fresh.shape or (states < 0).any() or (states >= nvec).any():
                 raise ValueError("reset states do not match this layout's observation space")
-            if self.layout.walls[states[:, 0], states[:, 1]].any():
-                raise ValueError("a reset state puts the agent in a wall")
+            full = self.state.copy()
+            full[mask] = states
+            for rules, rows in self.runs:  # (several maps: each run within its own)
+                (h, w), r, c = rules.layout.shape, full[rows, 0], full[rows, 1]
+                if (((r >= h) | (c >= w)) & mask[rows]).any():
+                    raise ValueError("reset states do not match this layout's observation space")
+                if rules.layout.walls[np.minimum(r, h - 1), np.minimum(c, w - 1)][mask[rows]].any():
+                    raise ValueError("a reset state puts the agent in a wall")
             fresh = states
         self.state[mask] = fresh
         self._restart(mask)
@@ -137,7 +153,12 @@ class KeyDoorVectorEnv(EpisodeClock, VectorEnv):
         u = self.np_random.random(self.num_envs)
         live = ~self.done
         s = self.state
-        success, move_failed = self.rules.step(s, actions, u, self.fail_prob, live)
+        if self.rules is not None:
+            success, move_failed = self.rules.step(s, actions, u, self.fail_prob, live)
+        else:  # each map's copies through its rules (in place: the runs are views of the state)
+            fail = np.broadcast_to(self.fail_prob, (self.num_envs,))
+            success, move_failed = (np.concatenate(parts) for parts in zip(*(
+                rules.step(s[rows], actions[rows], u[rows], fail[rows], live[rows]) for rules, rows in self.runs)))
         reward = self._tick(live, success)
         info = {"success": success, "move_failed": move_failed}
         return s.copy(), reward, self.terminated.copy(), self.truncated.copy(), info

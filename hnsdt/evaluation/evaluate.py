@@ -254,13 +254,13 @@ def metrics_json(summ: pd.DataFrame) -> dict:
 
 @dataclass(frozen=True)
 class Batch:
-    """One rollout of a method: ``copies`` copies of one layout, with one failure probability for all or one per
-    copy, from one environment seed — or one per equal run of copies (a tuple: the paper protocol's cells, each
+    """One rollout of a method: ``copies`` copies of one layout (or of several, one per equal run of copies), with
+    one failure probability for all or one per copy, from one environment seed — or one per equal run of copies (a tuple: the paper protocol's cells, each
     drawing what it would alone, :class:`hnsdt.envs.vector.Streams`); the agent draws from each ``seed + 1``.
     ``key`` is what the experiment's rows need to know about the batch (the paper protocol: its cells, :class:`Cell`;
-    unseen layouts: the layout's source and episodes per fail_prob)."""
+    unseen layouts: the sources of its maps and the episodes per fail_prob)."""
 
-    layout: Layout
+    layout: Layout | tuple[Layout, ...]  # one, or one per equal run of copies (unseen layouts: a split's maps)
     max_steps: int
     copies: int
     fail_prob: float | tuple[float, ...]
@@ -424,26 +424,37 @@ def episode_seed(seed: int, layout_index: int) -> int:
 
 
 def layout_rows(task: EvalTask, batch: Batch, episodes: list[Episode]) -> tuple[list[dict], list[dict]]:
-    """``(episode rows, sub-goal segment rows)`` of a layout's batch (``batch.key``: the layout's source and the
-    episodes per fail_prob); only plan-following methods have segments (:func:`segment_facts`)."""
-    src, per_fail_prob = batch.key
-    navigator = layout_navigator(src.layout) if any(ep.segments for ep in episodes) else None
+    """``(episode rows, sub-goal segment rows)`` of a batch of layouts (``batch.key``: the sources of its runs of
+    copies and the episodes per fail_prob); only plan-following methods have segments (:func:`segment_facts`)."""
+    sources, per_fail_prob = batch.key
+    each = batch.copies // len(sources)
     rows, segments = [], []
-    for i, ep in enumerate(episodes):
-        ids = {"method": task.method, "seed": task.seed, "split": src.split, "layout": src.name,
-               "fail_prob": float(batch.fail_prob[i]), "episode": i % per_fail_prob}
-        rows.append(ids | {"success": bool(ep.success), "steps": ep.length, "reward": round(ep.ret, 6)})
-        if ep.segments:
-            segments += [ids | row for row in segment_facts(ep, navigator, ids["fail_prob"])]
+    for k, src in enumerate(sources):
+        eps = episodes[k * each:(k + 1) * each]
+        navigator = layout_navigator(src.layout) if any(ep.segments for ep in eps) else None
+        for i, ep in enumerate(eps):
+            ids = {"method": task.method, "seed": task.seed, "split": src.split, "layout": src.name,
+                   "fail_prob": float(batch.fail_prob[k * each + i]), "episode": i % per_fail_prob}
+            rows.append(ids | {"success": bool(ep.success), "steps": ep.length, "reward": round(ep.ret, 6)})
+            if ep.segments:
+                segments += [ids | row for row in segment_facts(ep, navigator, ids["fail_prob"])]
     return rows, segments
 
 
 def layout_batches(seed: int, sources: tuple, fail_probs: tuple[float, ...], episodes: int) -> tuple[Batch, ...]:
-    """One batch per layout: its episodes at every failure probability run together (copies with their own
-    fail_prob), one agent call per step for all."""
-    per_copy = tuple(float(p) for p in np.repeat(np.asarray(fail_probs, dtype=np.float64), episodes))
-    return tuple(Batch(src.layout, src.max_steps, len(per_copy), per_copy, episode_seed(seed, li), (src, episodes))
-                 for li, src in enumerate(sources))
+    """One batch per run of consecutive sources with the same split and step limit (a split's maps): each map's
+    episodes at every failure probability (copies with their own fail_prob) from its own env seed, every map of
+    the batch stepped together, one agent call per step for all (the same episodes as a batch per map)."""
+    from itertools import groupby
+
+    per_layout = tuple(float(p) for p in np.repeat(np.asarray(fail_probs, dtype=np.float64), episodes))
+    batches = []
+    for _, run in groupby(enumerate(sources), key=lambda item: (item[1].split, item[1].max_steps)):
+        indices, srcs = zip(*run)
+        batches.append(Batch(tuple(s.layout for s in srcs), srcs[0].max_steps, len(per_layout) * len(srcs),
+                             per_layout * len(srcs), tuple(episode_seed(seed, li) for li in indices),
+                             (srcs, episodes)))
+    return tuple(batches)
 
 
 def evaluate_layouts(seeds: dict[str, list[int]], sources: tuple, fail_probs: tuple[float, ...],
