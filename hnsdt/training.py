@@ -90,14 +90,19 @@ class StepsToExit:
         return cls(method, executor, facts, tuple(courses))
 
     def __call__(self, model) -> float:
+        from itertools import groupby
+
         from hnsdt.agents.rollout import rollout
         from hnsdt.envs.vector import KeyDoorVectorEnv
 
-        lengths = []
-        for c in self.courses:
-            agent = resolve(METHODS[self.method].agent)(model, self.facts, c.layout, self.executor)
-            env = KeyDoorVectorEnv(len(c.starts), c.layout, 0.0, c.max_steps)
-            lengths += [e.length if e.success else c.max_steps for e in rollout(env, agent, 0, c.starts)]
+        lengths = []  # consecutive maps with as many starts and the same limit act as one batch, side by side
+        for (max_steps, _), run in groupby(self.courses, key=lambda c: (c.max_steps, len(c.starts))):
+            run = list(run)
+            layout = run[0].layout if len(run) == 1 else tuple(c.layout for c in run)
+            starts = np.concatenate([c.starts for c in run])
+            agent = resolve(METHODS[self.method].agent)(model, self.facts, layout, self.executor)
+            env = KeyDoorVectorEnv(len(starts), layout, 0.0, max_steps)
+            lengths += [e.length if e.success else max_steps for e in rollout(env, agent, 0, starts)]
         return float(np.mean(lengths))
 
 

@@ -1059,3 +1059,16 @@ def test_a_splits_maps_stepped_as_one_batch_are_each_map_run_alone(method):
         assert [(r["layout"], r["fail_prob"], r["episode"]) for r in rows[:4]] == [
             (batch.key[0][0].name, 0.0, 0), (batch.key[0][0].name, 0.0, 1), (batch.key[0][0].name, 0.0, 2),
             (batch.key[0][0].name, 0.3, 0)]
+
+
+def test_the_validation_measure_acts_on_its_maps_side_by_side():
+    """StepsToExit steps its validation maps as one batch (as many starts each): the mean of each map run alone
+    (here with the planner's own controllers, whose steps differ from map to map)."""
+    from hnsdt.agents.executor import ExecutorConfig
+    from hnsdt.training import StepsToExit
+
+    layouts = [generate("keydoor_maze", s) for s in (3, 4)] + [generate("keydoor", 5)]
+    measure = StepsToExit.on_layouts(layouts, 60, 6, "symbolic", ExecutorConfig(), {})
+    assert [len(c.starts) for c in measure.courses] == [2, 2, 2]
+    alone = [StepsToExit("symbolic", measure.executor, {}, (course,))(None) for course in measure.courses]
+    assert len(set(alone)) > 1 and measure(None) == pytest.approx(np.mean(alone), rel=1e-12)
