@@ -185,15 +185,21 @@ def load_layout(spec: str | Path | Layout) -> Layout:
     )
 
 
+def equal_runs(n: int, k: int, what: str) -> list[slice]:
+    """The rows of ``k`` equal runs of ``n`` batched copies (each with its own ``what``: a map, a random stream, a
+    cell), in order."""
+    if not k or n % k:
+        raise ValueError(f"{n} copies do not split evenly over {k} {what}")
+    each = n // k
+    return [slice(i * each, (i + 1) * each) for i in range(k)]
+
+
 def layout_runs(layouts: Layout | tuple[Layout, ...], n: int) -> list[tuple[Layout, slice]]:
     """``(layout, rows)`` of each equal run of ``n`` batched copies: one layout for all of them, or one per equal
     run (a tuple: a batch over several maps, as the unseen-layout evaluation steps a split's maps together)."""
     if isinstance(layouts, Layout):
         return [(layouts, slice(0, n))]
-    if not layouts or n % len(layouts):
-        raise ValueError(f"{n} copies do not split evenly over {len(layouts)} layouts")
-    each = n // len(layouts)
-    return [(lay, slice(i * each, (i + 1) * each)) for i, lay in enumerate(layouts)]
+    return list(zip(layouts, equal_runs(n, len(layouts), "layouts")))
 
 
 def reachable_cells(layout: Layout, origin: Cell, open_doors: set[str]) -> dict[Cell, int]:

@@ -23,7 +23,7 @@ from gymnasium.vector.utils import batch_space
 
 from hnsdt.envs.dynamics import GOAL_REWARD, N_ACTIONS, STEP_REWARD, Rules
 from hnsdt.envs.keydoor import check_env_params, observation_space_for
-from hnsdt.envs.layout import Layout, layout_runs, load_layout
+from hnsdt.envs.layout import Layout, equal_runs, layout_runs, load_layout
 
 
 class Streams:
@@ -33,21 +33,19 @@ class Streams:
     env or agent makes them."""
 
     def __init__(self, seeds: Sequence[int], n: int):
-        if n % len(seeds):
-            raise ValueError(f"{n} copies do not split evenly over {len(seeds)} random streams")
         self.generators = [seeding.np_random(int(s))[0] for s in seeds]
-        self.n, self.each = n, n // len(seeds)
+        self.n, self.runs = n, equal_runs(n, len(self.generators), "random streams")
 
-    def _sizes(self, size: int) -> list[int]:
+    def _draw(self, size: int, draw) -> np.ndarray:
         if size != self.n:
             raise ValueError(f"random streams for {self.n} copies asked for {size} draws")
-        return [self.each] * len(self.generators)
+        return np.concatenate([draw(g, rows.stop - rows.start) for g, rows in zip(self.generators, self.runs)])
 
     def random(self, size: int) -> np.ndarray:
-        return np.concatenate([g.random(k) for g, k in zip(self.generators, self._sizes(size))])
+        return self._draw(size, lambda g, k: g.random(k))
 
     def integers(self, low: int, high: int, size: int) -> np.ndarray:
-        return np.concatenate([g.integers(low, high, k) for g, k in zip(self.generators, self._sizes(size))])
+        return self._draw(size, lambda g, k: g.integers(low, high, k))
 
 
 def generator(seed: int | Sequence[int] | None, n: int) -> np.random.Generator | Streams:
@@ -109,7 +107,6 @@ class KeyDoorVectorEnv(EpisodeClock, VectorEnv):
         self.single_action_space = gym.spaces.Discrete(N_ACTIONS)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.rules = self.runs[0][0] if len(self.runs) == 1 else None  # (one layout: its rules)
         self.np_random, _ = seeding.np_random(None)
         self.state = self._initial_states()
         self._start_clock(self.num_envs, max_steps)
@@ -153,12 +150,10 @@ class KeyDoorVectorEnv(EpisodeClock, VectorEnv):
         u = self.np_random.random(self.num_envs)
         live = ~self.done
         s = self.state
-        if self.rules is not None:
-            success, move_failed = self.rules.step(s, actions, u, self.fail_prob, live)
-        else:  # each map's copies through its rules (in place: the runs are views of the state)
-            fail = np.broadcast_to(self.fail_prob, (self.num_envs,))
-            success, move_failed = (np.concatenate(parts) for parts in zip(*(
-                rules.step(s[rows], actions[rows], u[rows], fail[rows], live[rows]) for rules, rows in self.runs)))
+        fail = np.broadcast_to(self.fail_prob, (self.num_envs,))
+        # each map's copies through its rules (in place: the runs are views of the state)
+        success, move_failed = (np.concatenate(parts) for parts in zip(*(
+            rules.step(s[rows], actions[rows], u[rows], fail[rows], live[rows]) for rules, rows in self.runs)))
         reward = self._tick(live, success)
         info = {"success": success, "move_failed": move_failed}
         return s.copy(), reward, self.terminated.copy(), self.truncated.copy(), info

@@ -23,7 +23,7 @@ from hnsdt.agents.executor import REPLAN_REASONS, ExecutorConfig
 from hnsdt.agents.navigation import step_towards
 from hnsdt.agents.rollout import Agent, Episode, rollout
 from hnsdt.envs.keydoor import PICK
-from hnsdt.envs.layout import Layout
+from hnsdt.envs.layout import Layout, equal_runs
 from hnsdt.envs.vector import KeyDoorVectorEnv, Streams
 from hnsdt.core.methods import ARMS, resolve
 from hnsdt.core.methods import method as lookup_method
@@ -255,8 +255,9 @@ def metrics_json(summ: pd.DataFrame) -> dict:
 @dataclass(frozen=True)
 class Batch:
     """One rollout of a method: ``copies`` copies of one layout (or of several, one per equal run of copies), with
-    one failure probability for all or one per copy, from one environment seed — or one per equal run of copies (a tuple: the paper protocol's cells, each
-    drawing what it would alone, :class:`hnsdt.envs.vector.Streams`); the agent draws from each ``seed + 1``.
+    one failure probability for all or one per copy, from one environment seed — or one per equal run of copies
+    (a tuple: the paper protocol's cells or a split's maps, each drawing what it would alone,
+    :class:`hnsdt.envs.vector.Streams`); the agent draws from each ``seed + 1``.
     ``key`` is what the experiment's rows need to know about the batch (the paper protocol: its cells, :class:`Cell`;
     unseen layouts: the sources of its maps and the episodes per fail_prob)."""
 
@@ -301,11 +302,10 @@ def evaluate_run(task: EvalTask) -> list:
 def cell_outputs(task: EvalTask, batch: Batch, episodes: list[Episode]) -> list[tuple]:
     """The paper protocol's rows of each cell of a batch: ``(episode rows, segment rows, its first log_episodes
     episodes)`` per cell, in the batch's order."""
-    each = batch.copies // len(batch.key)
     navigator = layout_navigator(batch.layout)
     out = []
-    for i, cell in enumerate(batch.key):
-        eps = episodes[i * each:(i + 1) * each]
+    for cell, rows in zip(batch.key, equal_runs(batch.copies, len(batch.key), "cells")):
+        eps = episodes[rows]
         out.append((episode_rows(cell, eps, batch.layout, task.executor), segment_rows(cell, eps, navigator),
                     eps[:task.log_episodes]))
     return out
@@ -427,14 +427,13 @@ def layout_rows(task: EvalTask, batch: Batch, episodes: list[Episode]) -> tuple[
     """``(episode rows, sub-goal segment rows)`` of a batch of layouts (``batch.key``: the sources of its runs of
     copies and the episodes per fail_prob); only plan-following methods have segments (:func:`segment_facts`)."""
     sources, per_fail_prob = batch.key
-    each = batch.copies // len(sources)
     rows, segments = [], []
-    for k, src in enumerate(sources):
-        eps = episodes[k * each:(k + 1) * each]
+    for src, run in zip(sources, equal_runs(batch.copies, len(sources), "layouts")):
+        eps = episodes[run]
         navigator = layout_navigator(src.layout) if any(ep.segments for ep in eps) else None
         for i, ep in enumerate(eps):
             ids = {"method": task.method, "seed": task.seed, "split": src.split, "layout": src.name,
-                   "fail_prob": float(batch.fail_prob[k * each + i]), "episode": i % per_fail_prob}
+                   "fail_prob": float(batch.fail_prob[run.start + i]), "episode": i % per_fail_prob}
             rows.append(ids | {"success": bool(ep.success), "steps": ep.length, "reward": round(ep.ret, 6)})
             if ep.segments:
                 segments += [ids | row for row in segment_facts(ep, navigator, ids["fail_prob"])]
