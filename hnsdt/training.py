@@ -33,7 +33,7 @@ class TrainTask:
     data: Any  # offline: the dataset's frames; online: (layout or layouts, max_steps)
     facts: dict  # what goes into the checkpoint besides the configs
     progress: bool = False  # a progress bar (when it runs in the stage's process)
-    split: bool = False  # stop half-way and hand back the state (seeds that share workers)
+    split: bool = False  # hand back the state part-way (seeds that share workers; :func:`pause_at`)
     state: Any = None  # where a split run continues from
     measure: Any = None  # the validation measure when not the held-out loss (:class:`StepsToExit`)
 
@@ -190,25 +190,38 @@ def _check_operator_coverage(frames, params: Params, env: EnvSpec, method: str, 
                          "(collect.behaviours in params.yaml)")
 
 
+def pause_at(task: TrainTask) -> int | None:
+    """Where a seed that shares workers with other seeds hands back its state (``stop_after``), or None: it runs
+    to its end. A fixed budget pauses once, half-way (half its epochs or env steps); a run that a validation
+    plateau ends — after an epoch nobody knows beforehand, often before half its cap — pauses after every epoch,
+    so the seeds take turns epoch by epoch and no core waits alone for the last seed's epochs."""
+    if not task.split:
+        return None
+    cfg = task.train_cfg
+    if METHODS[task.method].training == "online":
+        return None if task.state is not None else (cfg.env_steps // 2 or None)
+    if task.measure is not None or getattr(cfg, "validation", 0) > 0:  # stops at a plateau
+        return (task.state.epoch if task.state is not None else 0) + 1
+    return None if task.state is not None else (cfg.epochs // 2 or None)
+
+
 def train_run(task: TrainTask):
-    """Train one seed: ``(model, checkpoint facts, curve)``. With ``task.split``, it stops half-way (half its
-    epochs, or half its env steps) and returns :class:`~hnsdt.core.compute.Continue` with its state (a
+    """Train one seed: ``(model, checkpoint facts, curve)``. With ``task.split``, it stops part-way
+    (:func:`pause_at`) and returns :class:`~hnsdt.core.compute.Continue` with its state (a
     :class:`~hnsdt.models.fit.FitState` or a paused :class:`~hnsdt.baselines.online.OnlineRun`): the
-    executor queues the second half behind the other seeds' first halves, so 5 seeds on 2 workers take 2.5
-    seed-times, and the weights are the same bytes as in one go (tested)."""
+    executor queues the rest behind the other seeds' parts, so 5 seeds on 2 workers take about 2.5
+    seed-times, not 3, and the weights are the same bytes as in one go (tested)."""
     from hnsdt.core.compute import Continue
 
     method, seed, model_cfg, train_cfg = task.method, task.seed, task.model_cfg, task.train_cfg
     online = METHODS[method].training == "online"
-    half = (train_cfg.env_steps if online else train_cfg.epochs) // 2
     trainer = resolve(METHODS[method].trainer)
     args = task.data if online else (task.data,)  # online: (layout(s), max_steps)
     extra = {"measure": task.measure} if task.measure is not None else {}  # (DTs; offline baselines with patience)
     out = trainer(*args, model_cfg, train_cfg, progress=task.progress, desc=f"{method} seed {seed}",
-                  network=network_for(method, model_cfg), state=task.state,
-                  stop_after=(half or None) if task.split else None, **extra)
-    if not isinstance(out, tuple):  # paused half-way
-        return Continue(replace(task, split=False, state=out))
+                  network=network_for(method, model_cfg), state=task.state, stop_after=pause_at(task), **extra)
+    if not isinstance(out, tuple):  # paused part-way
+        return Continue(replace(task, state=out))
     model, curve, usage = out
     model.cpu()
     return model, {"seed": seed, **task.facts, "train": asdict(train_cfg), "usage": usage, "curve": curve}, curve
@@ -225,7 +238,7 @@ def train_all(runs: list[TrainTask], env: str, out: Path, curves: Path, compute,
 
     inline = compute.executor == "local" and compute.local_workers(len(runs)) == 1
     method = runs[0].method
-    # seeds split in halves where they share workers (in one process a split would only cost a model rebuild)
+    # seeds paused part-way where they share workers (in one process a pause would only cost a model rebuild)
     tasks = [replace(r, progress=progress and inline, split=not inline) for r in runs]
     results = run_tasks(train_run, tasks, compute, desc=f"train {env} {method}", progress=progress and not inline)
     with atomic_dir(out) as staging, atomic_dir(curves) as curve_staging:

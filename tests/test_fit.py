@@ -2,6 +2,7 @@
 the executor queues a task's continuation behind the waiting tasks and returns results in task order."""
 
 import pickle
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -149,6 +150,32 @@ def test_a_validated_run_stopped_and_continued_elsewhere_is_the_run_in_one_go(fr
                                                               state=pickle.loads(pickle.dumps(state)))
     assert part_curve == curve and part_usage == usage and usage["validation_frames"] > 0
     assert usage["best_epoch"] == min(usage["validation_loss"], key=lambda h: h["value"])["epoch"]
+    for (name, a), b in zip(whole.state_dict().items(), part.state_dict().values()):
+        assert torch.equal(a, b), name
+
+
+@pytest.mark.parametrize("validated", [True, False], ids=["plateau", "fixed_budget"])
+def test_a_seed_sharing_workers_pauses_after_every_epoch_when_a_plateau_ends_it(frames, keydoor, validated):
+    """Where seeds share workers (train_all), a run that a validation plateau ends — after an epoch no one knows
+    beforehand — hands back its state after every epoch, so the seeds take turns epoch by epoch; a fixed budget
+    pauses once, half-way. Chained through pickles (as between processes), each ends in the run's bytes."""
+    from hnsdt.training import TrainTask, train_run
+
+    cfg = DTConfig("return", keydoor.n_flags, *keydoor.shape, context=4, n_layers=1, d_model=32, dropout=0.3,
+                   max_timestep=100, formulation="episode")
+    tc = (TrainConfig(epochs=8, batch_size=32, seed=2, log_every=3, validation=0.25, patience=1, lr=0.02)
+          if validated else TrainConfig(epochs=4, batch_size=32, seed=2, log_every=3))
+    task = TrainTask("pure_dt", 2, cfg, tc, frames, {"dataset": "d"})
+    whole, facts, curve = train_run(task)
+    epochs = facts["usage"]["epochs"]
+    assert not validated or 2 < epochs < 8  # (the plateau ended it before the cap, after a few epochs)
+    out, pauses = train_run(pickle.loads(pickle.dumps(replace(task, split=True)))), []
+    while isinstance(out, Continue):
+        pauses.append(out.task.state.epoch)
+        out = train_run(pickle.loads(pickle.dumps(out.task)))
+    assert pauses == (list(range(1, int(epochs))) if validated else [2])
+    part, part_facts, part_curve = out
+    assert part_facts == facts and part_curve == curve
     for (name, a), b in zip(whole.state_dict().items(), part.state_dict().values()):
         assert torch.equal(a, b), name
 
