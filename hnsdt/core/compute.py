@@ -18,6 +18,7 @@ as a new task — which goes to the back of the queue: a training seed hands bac
 from __future__ import annotations
 
 import os
+import pickle
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -57,6 +58,13 @@ def _call(fn: Callable, threads: int, task: Any) -> Any:
     return fn(task)
 
 
+def _call_pickled(fn: Callable, threads: int, task: bytes) -> bytes:
+    # A task and its result cross to and from a worker process as one plain pickle each: the pool's own
+    # pickler (torch's) would move every tensor of a model or a state through shared memory, a file descriptor
+    # and a socket handshake apiece — 0.4-0.5 s per transformer, measured, against 0.05 s as bytes.
+    return pickle.dumps(_call(fn, threads, pickle.loads(task)), protocol=pickle.HIGHEST_PROTOCOL)
+
+
 def run_tasks(fn: Callable, tasks: list, compute: Compute = Compute(), desc: str = "runs",
               progress: bool = True) -> list:
     """``[fn(task) for task in tasks]``, computed by ``compute``'s executor; results in task order."""
@@ -81,15 +89,19 @@ def run_tasks(fn: Callable, tasks: list, compute: Compute = Compute(), desc: str
 
         # spawn, not fork: a forked child would inherit torch's thread pools from this process.
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            running = {pool.submit(_call, fn, compute.threads, task): i for i, task in enumerate(tasks)}
+            def submit(task):
+                return pool.submit(_call_pickled, fn, compute.threads,
+                                   pickle.dumps(task, protocol=pickle.HIGHEST_PROTOCOL))
+
+            running = {submit(task): i for i, task in enumerate(tasks)}
             out = [None] * len(tasks)
             while running:
                 done, _ = wait(running, return_when=FIRST_COMPLETED)
                 for future in sorted(done, key=running.get):
                     i = running.pop(future)
-                    result = future.result()
+                    result = pickle.loads(future.result())
                     if isinstance(result, Continue):
-                        running[pool.submit(_call, fn, compute.threads, result.task)] = i
+                        running[submit(result.task)] = i
                     else:
                         out[i] = result
                         bar.update(1)

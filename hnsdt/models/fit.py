@@ -11,8 +11,7 @@ keep 2 workers busy for about 2.5 seed-times instead of 3.
 
 from __future__ import annotations
 
-import pickle
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
@@ -38,15 +37,6 @@ class FitState:
     curve: list[dict] = field(default_factory=list)
     validated: list[dict] = field(default_factory=list)  # Validation.history so far
     best: tuple | None = None  # (value, epoch, weights) of the best validated epoch so far
-
-    def __reduce__(self):
-        # handed between processes as one plain pickle: a process pool would move each tensor through shared
-        # memory, a file descriptor apiece — ≈ 0.4 s per hand-over of a transformer's state, against ≈ 0.05 s
-        return _fit_state, (pickle.dumps(tuple(getattr(self, f.name) for f in fields(self))),)
-
-
-def _fit_state(data: bytes) -> FitState:
-    return FitState(*pickle.loads(data))
 
 
 @dataclass
