@@ -47,10 +47,10 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 AFTER_THE_PIPELINE_RUN = {"test_pipeline_resume.py", "test_pipeline_use.py"}  # files that copy the shared tiny pipeline run (below)
-# the end-to-end files, whose tests build on each other's repo: each runs whole on one worker, in order; the
-# worker that runs the tiny pipeline (test_pipeline.py) resumes it too, the other one, after the rest, uses it
-END_TO_END = {"test_pipeline.py": "tiny pipeline", "test_pipeline_resume.py": "tiny pipeline",
-              "test_pipeline_use.py": "test_pipeline_use.py"}
+# the end-to-end files whose tests build on each other's repo run whole on one worker, in order: the worker that
+# runs the tiny pipeline (test_pipeline.py) resumes it too. test_pipeline_use.py's tests each copy the run for
+# themselves: they go, last, to whichever worker is free, so neither worker ends alone on both
+END_TO_END = {"test_pipeline.py": "tiny pipeline", "test_pipeline_resume.py": "tiny pipeline"}
 
 
 def pytest_xdist_make_scheduler(config, log):
@@ -64,17 +64,33 @@ def pytest_xdist_make_scheduler(config, log):
         def _split_scope(self, nodeid: str) -> str:
             return END_TO_END.get(os.path.basename(nodeid.split("::", 1)[0]), nodeid)
 
+        def _reschedule(self, node) -> None:
+            # xdist tops a worker up once it has 2 tests or fewer left, so near the end a busy worker holds tests
+            # the idle one could run; here a worker holds the test it runs and the next (which it needs to know
+            # before it runs one: fixture teardown), no more
+            if node.shutting_down:
+                return
+            if not self.workqueue:
+                node.shutdown()
+            elif self._pending_of(self.assigned_work[node]) <= 1:
+                self._assign_work_unit(node)
+
     return OneTestOrEndToEndFiles(config, log)
 
 
 def pytest_collection_modifyitems(items):
     """The order the workers are handed tests in (pytest_xdist_make_scheduler above; `--no-loadscope-reorder`):
-    the longest first — files with slow (end-to-end) tests, then the learning tests — so that the short ones
-    fill the gaps at the end; the files that copy the tiny pipeline's run last, so that the worker that takes
-    one finds the run done (by the worker running test_pipeline.py) rather than waiting for it."""
+    the longest first — files with slow (end-to-end) tests, then the learning tests, then the files that copy
+    the tiny pipeline's run (by then the worker running test_pipeline.py has about finished it) — so that the
+    short ones fill the gaps at the end."""
     slow_files = {item.path for item in items if item.get_closest_marker("slow")}
-    items.sort(key=lambda item: (item.path.name in AFTER_THE_PIPELINE_RUN, item.path not in slow_files,
-                                 item.get_closest_marker("learning") is None))  # stable
+
+    def rank(item) -> int:
+        if item.path.name in AFTER_THE_PIPELINE_RUN:
+            return 2
+        return 0 if item.path in slow_files else 1 if item.get_closest_marker("learning") else 3
+
+    items.sort(key=rank)  # stable
 
 
 @pytest.fixture(scope="session")

@@ -1,7 +1,7 @@
 """A user's work on the tiny pipeline's run: the trained models on a folder of their own maps, and an
 experiment with one changed knob beside the committed run. On a copy of the run shared with test_pipeline.py
-(conftest's ``pipeline_run``), in a file of its own so that a second pytest-xdist worker runs these while the
-first finishes test_pipeline.py."""
+(conftest's ``pipeline_run``; each worker makes its own), handed last, the longer first, to whichever pytest-xdist
+worker is free (tests/conftest.py): neither test depends on what the other changes."""
 
 from pathlib import Path
 
@@ -24,22 +24,6 @@ def _set(repo: Path, section: str, key: str, value) -> None:
     (repo / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
 
 
-def test_the_trained_models_run_on_a_folder_of_a_users_maps(tmp_path, repo_copy, first_run):
-    """`hnsdt generalisation evaluate --drawn FOLDER`: the pipeline's trained models on maps a user drew, as the
-    split `drawn` beside the others (the pipeline's outputs untouched)."""
-    (tmp_path / "mine").mkdir()
-    (tmp_path / "mine/long_corridor.txt").write_text("@.........a\n#########A#\nG..........\n")
-    before = (repo_copy / "generalisation/results/summary.csv").read_bytes()
-    out = hnsdt_cli("generalisation", "evaluate", "--drawn", tmp_path / "mine", "--out", tmp_path / "results",
-                    "--quiet", cwd=repo_copy)
-    assert out.returncode == 0, out.stderr
-    episodes = pd.read_csv(tmp_path / "results/episodes.csv")
-    drawn = episodes[episodes.split == "drawn"]
-    assert set(drawn.layout) == {str(tmp_path / "mine/long_corridor.txt")}
-    assert set(drawn.method) == set(UNSEEN) | {"symbolic"} and drawn[drawn.method == "symbolic"].success.all()
-    assert (repo_copy / "generalisation/results/summary.csv").read_bytes() == before
-
-
 def test_a_changed_knob_reruns_only_the_stages_that_read_it(repo_copy, first_run):
     # the README's compare-two-runs workflow: an experiment with one changed knob beside the committed run
     run(["git", "add", "-A"], repo_copy)  # dvc.lock and the outputs kept in git (the rest: DVC's .gitignore)
@@ -60,3 +44,19 @@ def test_a_changed_knob_reruns_only_the_stages_that_read_it(repo_copy, first_run
     _set(repo_copy, "envs.keydoor", "max_steps", 60)  # one env's knob: everything on that env
     assert changed_stages(repo_copy) == {"collect@keydoor", "evaluate"} | {
         f"{STAGES[m]}@keydoor-{m}" for m in STAGES}
+
+
+def test_the_trained_models_run_on_a_folder_of_a_users_maps(tmp_path, repo_copy, first_run):
+    """`hnsdt generalisation evaluate --drawn FOLDER`: the pipeline's trained models on maps a user drew, as the
+    split `drawn` beside the others (the pipeline's outputs untouched)."""
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine/long_corridor.txt").write_text("@.........a\n#########A#\nG..........\n")
+    before = (repo_copy / "generalisation/results/summary.csv").read_bytes()
+    out = hnsdt_cli("generalisation", "evaluate", "--drawn", tmp_path / "mine", "--out", tmp_path / "results",
+                    "--quiet", cwd=repo_copy)
+    assert out.returncode == 0, out.stderr
+    episodes = pd.read_csv(tmp_path / "results/episodes.csv")
+    drawn = episodes[episodes.split == "drawn"]
+    assert set(drawn.layout) == {str(tmp_path / "mine/long_corridor.txt")}
+    assert set(drawn.method) == set(UNSEEN) | {"symbolic"} and drawn[drawn.method == "symbolic"].success.all()
+    assert (repo_copy / "generalisation/results/summary.csv").read_bytes() == before

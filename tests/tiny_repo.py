@@ -39,7 +39,7 @@ def copy_repo(dst: Path) -> None:
 
 def tiny_params(path: Path) -> None:
     """Every stage kind runs, each in seconds: Case 1 only (Case 2 runs the same stages with another layout),
-    9 episodes, 1 seed, a few gradient / env steps."""
+    9 episodes, 1 seed, a few gradient / env steps, one process per stage."""
     params = yaml.safe_load(path.read_text())
     params["envs"] = {"keydoor": params["envs"]["keydoor"]}
     params["train"]["envs"] = ["keydoor"]
@@ -52,6 +52,8 @@ def tiny_params(path: Path) -> None:
     for method in params["baselines"]["online"]:
         params["baselines"][method].update(env_steps=400, learning_starts=200)
     params["evaluate"].update(episodes=4, fail_probs=[0.0, 0.2])
+    params["compute"]["workers"] = 1  # every stage in its own process: a pool's workers would each import torch
+    # (≈ 2.5 s) for seconds of work, on cores the other test worker uses (pools: tests/test_train_cli.py)
     params["generalisation"].update(train_layouts=3, evaluated_train_layouts=1, heldout_layouts=1, seeds=[0],
                                     method_seeds={}, episodes_per_layout=2, episodes=2,
                                     budgets={})  # the tiny knobs above
