@@ -104,6 +104,20 @@ def test_continued_tasks_come_back_in_task_order(workers):
     assert out == ["a done", "b done", "c done", "d done", "e done"]
 
 
+def test_one_worker_runs_its_tasks_through_the_pickles_of_a_pool():
+    """What one process runs is what a pool's worker would be handed: a task that cannot cross to a worker (a
+    lambda here) fails in this process too, and a result comes back as a copy, not the object the task made."""
+    with pytest.raises((pickle.PicklingError, AttributeError)):
+        run_tasks(_countdown, [("a", 1), (lambda: 0, 1)], Compute(workers=1), progress=False)
+    state = np.arange(3)
+    (out,) = run_tasks(_same, [state], Compute(workers=1), progress=False)
+    assert out is not state and (out == state).all()
+
+
+def _same(task):
+    return task
+
+
 def test_episode_batches_hold_each_episode_once_and_close_at_the_batch_size():
     from hnsdt.models.fit import Objective
 

@@ -9,7 +9,8 @@ as a new task — which goes to the back of the queue: a training seed hands bac
 (:func:`hnsdt.training.pause_at`), so that 5 seeds on 2 workers take about 2.5 seed-times instead of 3.
 
 * ``local`` (default): a pool of ``workers`` spawned processes (0 = one per core / threads); one worker runs
-  the tasks in this process.
+  the tasks in this process, each task and result through the same plain pickles as a pool's (so a task that
+  would not cross to a worker fails here too).
 * ``ray``: one Ray task per run, ``num_cpus = threads``. Connects to ``RAY_ADDRESS`` when it is set (a
   cluster whose nodes have this package installed at the same revision), otherwise starts a local Ray
   instance. The pinned CPU settings travel in the tasks' runtime environment.
@@ -58,11 +59,15 @@ def _call(fn: Callable, threads: int, task: Any) -> Any:
     return fn(task)
 
 
+def _dumps(obj: Any) -> bytes:
+    return pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+
+
 def _call_pickled(fn: Callable, threads: int, task: bytes) -> bytes:
     # A task and its result cross to and from a worker process as one plain pickle each: the pool's own
     # pickler (torch's) would move every tensor of a model or a state through shared memory, a file descriptor
     # and a socket handshake apiece — 0.4-0.5 s per transformer, measured, against 0.05 s as bytes.
-    return pickle.dumps(_call(fn, threads, pickle.loads(task)), protocol=pickle.HIGHEST_PROTOCOL)
+    return _dumps(_call(fn, threads, pickle.loads(task)))
 
 
 def run_tasks(fn: Callable, tasks: list, compute: Compute = Compute(), desc: str = "runs",
@@ -75,12 +80,12 @@ def run_tasks(fn: Callable, tasks: list, compute: Compute = Compute(), desc: str
         if compute.executor == "ray":
             return _run_ray(fn, tasks, compute, bar)
         workers = compute.local_workers(len(tasks))
-        if workers == 1:
+        if workers == 1:  # here, through the pickles a pool's tasks cross: what runs here would run there
             out = []
             for task in tasks:
-                result = _call(fn, compute.threads, task)
+                result = pickle.loads(_call_pickled(fn, compute.threads, _dumps(task)))
                 while isinstance(result, Continue):
-                    result = _call(fn, compute.threads, result.task)
+                    result = pickle.loads(_call_pickled(fn, compute.threads, _dumps(result.task)))
                 out.append(result)
                 bar.update(1)
             return out
@@ -90,8 +95,7 @@ def run_tasks(fn: Callable, tasks: list, compute: Compute = Compute(), desc: str
         # spawn, not fork: a forked child would inherit torch's thread pools from this process.
         with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
             def submit(task):
-                return pool.submit(_call_pickled, fn, compute.threads,
-                                   pickle.dumps(task, protocol=pickle.HIGHEST_PROTOCOL))
+                return pool.submit(_call_pickled, fn, compute.threads, _dumps(task))
 
             running = {submit(task): i for i, task in enumerate(tasks)}
             out = [None] * len(tasks)
