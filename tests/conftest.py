@@ -48,8 +48,9 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 AFTER_THE_PIPELINE_RUN = {"test_pipeline_resume.py", "test_pipeline_use.py"}  # files that copy the shared tiny pipeline run (below)
 # the end-to-end files whose tests build on each other's repo run whole on one worker, in order: the worker that
-# runs the tiny pipeline (test_pipeline.py) resumes it too. test_pipeline_use.py's tests each copy the run for
-# themselves: they go, last, to whichever worker is free, so neither worker ends alone on both
+# runs the tiny pipeline (test_pipeline.py) resumes it too. test_pipeline_use.py's tests do not depend on each
+# other's changes (each worker copies the run for itself): they go to whichever worker is free, so that neither
+# worker ends alone on both
 END_TO_END = {"test_pipeline.py": "tiny pipeline", "test_pipeline_resume.py": "tiny pipeline"}
 
 

@@ -81,11 +81,14 @@ def run_tasks(fn: Callable, tasks: list, compute: Compute = Compute(), desc: str
             return _run_ray(fn, tasks, compute, bar)
         workers = compute.local_workers(len(tasks))
         if workers == 1:  # here, through the pickles a pool's tasks cross: what runs here would run there
+            def call(task):
+                return pickle.loads(_call_pickled(fn, compute.threads, _dumps(task)))
+
             out = []
             for task in tasks:
-                result = pickle.loads(_call_pickled(fn, compute.threads, _dumps(task)))
+                result = call(task)
                 while isinstance(result, Continue):
-                    result = pickle.loads(_call_pickled(fn, compute.threads, _dumps(result.task)))
+                    result = call(result.task)
                 out.append(result)
                 bar.update(1)
             return out
