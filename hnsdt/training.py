@@ -190,46 +190,72 @@ def _check_operator_coverage(frames, params: Params, env: EnvSpec, method: str, 
                          "(collect.behaviours in params.yaml)")
 
 
+@dataclass(frozen=True)
+class SeedStack:
+    """An online learner's seeds as one task, trained in lockstep (:class:`~hnsdt.baselines.online.OnlineRun`):
+    each seed gets the bytes it gets alone (tested), and torch's per-step cost — most of a small network's step —
+    is paid once for all of them."""
+
+    runs: tuple[TrainTask, ...]
+
+
+def seed_stacks(runs: list[TrainTask], compute) -> list[SeedStack]:
+    """One stack per local worker, seeds in order (5 seeds on 2 workers: 3 and 2); on Ray one per seed."""
+    stacks = compute.local_workers(len(runs)) if compute.executor == "local" else len(runs)
+    return [SeedStack(tuple(runs[i] for i in part)) for part in np.array_split(np.arange(len(runs)), stacks)]
+
+
 def pause_at(task: TrainTask) -> int | None:
     """Where a seed that shares workers with other seeds hands back its state (``stop_after``), or None: it runs
-    to its end. A fixed budget pauses once, half-way (half its epochs or env steps); a run that a validation
-    plateau ends — after an epoch nobody knows beforehand, often before half its cap — pauses after every epoch,
-    so the seeds take turns epoch by epoch and no core waits alone for the last seed's epochs."""
+    to its end. A fixed budget pauses once, half-way (half its epochs); a run that a validation plateau ends —
+    after an epoch nobody knows beforehand, often before half its cap — pauses after every epoch, so the seeds
+    take turns epoch by epoch and no core waits alone for the last seed's epochs. (Online learners' seeds share
+    no worker: they train in stacks, :func:`seed_stacks`.)"""
     if not task.split:
         return None
     cfg = task.train_cfg
-    if METHODS[task.method].training == "online":
-        return None if task.state is not None else (cfg.env_steps // 2 or None)
     if task.measure is not None or getattr(cfg, "validation", 0) > 0:  # stops at a plateau
         return (task.state.epoch if task.state is not None else 0) + 1
     return None if task.state is not None else (cfg.epochs // 2 or None)
 
 
-def train_run(task: TrainTask):
-    """Train one seed: ``(model, checkpoint facts, curve)``. With ``task.split``, it stops part-way
-    (:func:`pause_at`) and returns :class:`~hnsdt.core.compute.Continue` with its state (a
-    :class:`~hnsdt.models.fit.FitState` or a paused :class:`~hnsdt.baselines.online.OnlineRun`): the
-    executor queues the rest behind the other seeds' parts, so 5 seeds on 2 workers take about 2.5
-    seed-times, not 3, and the weights are the same bytes as in one go (tested)."""
+def _trained(task: TrainTask, model, curve: list[dict], usage: dict):
+    """A task's result: ``(model, checkpoint facts, curve)``."""
+    model.cpu()
+    return model, {"seed": task.seed, **task.facts, "train": asdict(task.train_cfg), "usage": usage,
+                   "curve": curve}, curve
+
+
+def train_run(task: TrainTask | SeedStack):
+    """Train one seed: ``(model, checkpoint facts, curve)``; a :class:`SeedStack`, a list of them. With
+    ``task.split``, it stops part-way (:func:`pause_at`) and returns :class:`~hnsdt.core.compute.Continue` with
+    its state (a :class:`~hnsdt.models.fit.FitState`): the executor queues the rest behind the other seeds'
+    parts, so 5 seeds on 2 workers take about 2.5 seed-times, not 3, and the weights are the same bytes as in
+    one go (tested)."""
     from hnsdt.core.compute import Continue
 
-    method, seed, model_cfg, train_cfg = task.method, task.seed, task.model_cfg, task.train_cfg
+    if isinstance(task, SeedStack):
+        first, runs = task.runs[0], task.runs
+        trainer = resolve(METHODS[first.method].trainer)
+        out = trainer(*first.data, first.model_cfg, [r.train_cfg for r in runs], progress=first.progress,
+                      desc=f"{first.method} seeds {', '.join(str(r.seed) for r in runs)}",
+                      network=network_for(first.method, first.model_cfg))
+        return [_trained(run, *result) for run, result in zip(runs, out)]
+    method, model_cfg = task.method, task.model_cfg
     online = METHODS[method].training == "online"
     trainer = resolve(METHODS[method].trainer)
     args = task.data if online else (task.data,)  # online: (layout(s), max_steps)
     extra = {"measure": task.measure} if task.measure is not None else {}  # (DTs; offline baselines with patience)
-    out = trainer(*args, model_cfg, train_cfg, progress=task.progress, desc=f"{method} seed {seed}",
+    out = trainer(*args, model_cfg, task.train_cfg, progress=task.progress, desc=f"{method} seed {task.seed}",
                   network=network_for(method, model_cfg), state=task.state, stop_after=pause_at(task), **extra)
     if not isinstance(out, tuple):  # paused part-way
         return Continue(replace(task, state=out))
-    model, curve, usage = out
-    model.cpu()
-    return model, {"seed": seed, **task.facts, "train": asdict(train_cfg), "usage": usage, "curve": curve}, curve
+    return _trained(task, *out)
 
 
 def train_all(runs: list[TrainTask], env: str, out: Path, curves: Path, compute, progress: bool = True) -> None:
-    """Run every seed's task on ``compute`` and write ``out/seedK/`` checkpoints and ``curves/seedK.csv``,
-    each folder complete or absent."""
+    """Run every seed's task on ``compute`` (an online learner's seeds in stacks, :func:`seed_stacks`) and write
+    ``out/seedK/`` checkpoints and ``curves/seedK.csv``, each folder complete or absent."""
     import pandas as pd
 
     from hnsdt.core.compute import run_tasks
@@ -238,9 +264,15 @@ def train_all(runs: list[TrainTask], env: str, out: Path, curves: Path, compute,
 
     inline = compute.executor == "local" and compute.local_workers(len(runs)) == 1
     method = runs[0].method
+    desc = f"train {env} {method}"
     # seeds paused part-way where they share workers (in one process a pause would only cost a model rebuild)
     tasks = [replace(r, progress=progress and inline, split=not inline) for r in runs]
-    results = run_tasks(train_run, tasks, compute, desc=f"train {env} {method}", progress=progress and not inline)
+    if METHODS[method].training == "online":
+        stacks = seed_stacks([replace(t, split=False) for t in tasks], compute)
+        results = [r for stack in run_tasks(train_run, stacks, compute, desc=desc, progress=progress and not inline)
+                   for r in stack]
+    else:
+        results = run_tasks(train_run, tasks, compute, desc=desc, progress=progress and not inline)
     with atomic_dir(out) as staging, atomic_dir(curves) as curve_staging:
         staging.mkdir()
         curve_staging.mkdir()

@@ -9,7 +9,7 @@ import torch
 
 from hnsdt.agents import SymbolicAgent, rollout
 from hnsdt.baselines.dqn import DQNAgent, DQNConfig, train_dqn
-from hnsdt.baselines.options import OptionsAgent, train_options
+from hnsdt.baselines.options import OptionsAgent, OptionsConfig, train_options
 from hnsdt.baselines.recurrent import RecurrentAgent, RecurrentTrainConfig, episode_batch, train_recurrent
 from hnsdt.agents.rollout import RandomAgent
 from hnsdt.core.config import ParamsError, baseline_settings, evaluate_settings, load_params
@@ -123,6 +123,60 @@ def test_options_learns_to_cross_a_room(params):
         successes.append(_success(room, OptionsAgent(model, seed=0), horizon=20))
     assert random_success < 0.1
     assert sum(s >= 0.8 for s in successes) >= 2 and np.mean(successes) > random_success + 0.3, successes
+
+
+def _stack_or_alone(learner, layout, seeds):
+    """``learner`` (dqn / options) trained on seeds as one stack, and on each seed alone: (stacked, alone)
+    results, each a list of (model, curve, usage)."""
+    from hnsdt.models.view import ViewOptionCritic, ViewOptionCriticConfig
+
+    if learner == "dqn":
+        net, train, network = QNetworkConfig(layout.n_flags, *layout.shape, hidden=16), train_dqn, QNetwork
+        cfgs = [DQNConfig(env_steps=800, learning_starts=200, batch_size=32, target_period=20, seed=s) for s in seeds]
+    else:  # on views of generated maps, a new one at every reset
+        net = ViewOptionCriticConfig(layout[0].n_flags, 0, 0, hidden=16, view_radius=2)
+        train, network = train_options, ViewOptionCritic
+        cfgs = [OptionsConfig(env_steps=800, learning_starts=200, batch_size=32, target_period=20, seed=s)
+                for s in seeds]
+    stacked = train(layout, 30, net, cfgs, progress=False, network=network)
+    return stacked, [train(layout, 30, net, cfg, progress=False, network=network) for cfg in cfgs]
+
+
+@pytest.mark.parametrize("learner", ["dqn", "options"])
+def test_seeds_trained_as_a_stack_get_the_bytes_each_gets_alone(keydoor, learner):
+    """Stage `train_online` trains an online learner's seeds in lockstep, one stacked network per worker: each
+    seed's weights and curve are those of its run alone, in whatever stack (three seeds, out of order)."""
+    from hnsdt.envs.generate import generate
+
+    layout = keydoor if learner == "dqn" else [generate("keydoor_maze", s) for s in range(3)]
+    stacked, alone = _stack_or_alone(learner, layout, [2, 0, 1])
+    for (a, curve_a, usage_a), (b, curve_b, usage_b) in zip(stacked, alone):
+        assert list(a.state_dict()) == list(b.state_dict())
+        assert all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values()))
+        assert curve_a == curve_b and usage_a == usage_b and usage_a["gradient_steps"] > 0
+    first, second = (m.state_dict() for m, _, _ in stacked[:2])
+    assert not all(torch.equal(first[k], second[k]) for k in first)  # the seeds do differ
+
+
+def test_a_stack_is_of_one_training_config_and_of_linear_layers(keydoor):
+    net = QNetworkConfig(keydoor.n_flags, *keydoor.shape, hidden=16)
+    with pytest.raises(ValueError, match="share every training knob but their seed"):
+        train_dqn(keydoor, 30, net, [DQNConfig(env_steps=80, seed=0), DQNConfig(env_steps=80, lr=0.1, seed=1)],
+                  progress=False)
+    from hnsdt.baselines.online import stack_networks
+
+    with pytest.raises(TypeError, match="Embedding has weights but is no kernels.Linear"):
+        stack_networks([torch.nn.Sequential(torch.nn.Embedding(3, 2)) for _ in range(2)])
+
+
+def test_online_seeds_train_in_one_stack_per_worker():
+    from hnsdt.core.compute import Compute
+    from hnsdt.training import seed_stacks
+
+    assert [s.runs for s in seed_stacks([0, 1, 2, 3, 4], Compute(workers=2))] == [(0, 1, 2), (3, 4)]
+    assert [s.runs for s in seed_stacks([0, 1], Compute(workers=4))] == [(0,), (1,)]
+    assert [s.runs for s in seed_stacks([0, 1, 2], Compute(workers=1))] == [(0, 1, 2)]
+    assert len(seed_stacks([0, 1, 2], Compute(executor="ray"))) == 3
 
 
 def test_online_training_is_seeded_and_checkpoints_round_trip(tmp_path, keydoor):

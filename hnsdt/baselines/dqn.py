@@ -14,7 +14,8 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from hnsdt.baselines.online import OnlineAgent, OnlineConfig, OnlineRun, linear_schedule, start_run
+from hnsdt.baselines.online import (OnlineAgent, OnlineConfig, OnlineRun, finish, linear_schedule, seed_configs,
+                                    start_run)
 from hnsdt.envs.keydoor import N_ACTIONS
 from hnsdt.envs.layout import Layout
 from hnsdt.models.qnetwork import QNetwork, QNetworkConfig
@@ -27,54 +28,50 @@ class DQNConfig(OnlineConfig):
     train_every: int = 4  # env steps per gradient step
 
 
-def train_dqn(layout: Layout | list[Layout], max_steps: int, net_cfg: QNetworkConfig, cfg: DQNConfig,
+def train_dqn(layout: Layout | list[Layout], max_steps: int, net_cfg: QNetworkConfig, cfg: DQNConfig | list[DQNConfig],
               progress: bool = True, desc: str = "train", network: type = QNetwork, state: OnlineRun | None = None,
               stop_after: int | None = None):
-    """``layout``: one map, or a list to draw from at every reset (then ``network`` reads views). Returns the
-    model, its curve and the data used; or, when ``stop_after`` env steps come before the end, the paused
-    :class:`OnlineRun`, which ``state`` continues."""
-    run = start_run(layout, max_steps, network, net_cfg, cfg, state)
-    rng, device, env, q, target = run.rng, run.device, run.env, run.net, run.target
-    obs, buffer, stats, steps, curve = run.obs, run.buffer, run.stats, run.steps, run.curve
-    due, next_log = run.loop.get("due", 0.0), run.loop.get("next_log", cfg.log_every)
-    explore_steps = int(cfg.exploration_fraction * cfg.env_steps)
-    limit = cfg.env_steps if stop_after is None else min(stop_after, cfg.env_steps)
-    bar = tqdm(total=cfg.env_steps, initial=steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
+    """``layout``: one map, or a list to draw from at every reset (then ``network`` reads views). ``cfg``: one
+    config, or one per seed of a stack trained in lockstep (:class:`OnlineRun`). Returns the model, its curve and
+    the data used (a list of them for a list of configs); or, when ``stop_after`` env steps come before the end,
+    the paused :class:`OnlineRun`, which ``state`` continues."""
+    cfgs = seed_configs(cfg)
+    c = cfgs[0]
+    run = start_run(layout, max_steps, network, net_cfg, cfgs, state)
+    q, target, device, steps = run.net, run.target, run.device, run.steps
+    due, next_log = run.loop.get("due", 0.0), run.loop.get("next_log", c.log_every)
+    explore_steps = int(c.exploration_fraction * c.env_steps)
+    limit = c.env_steps if stop_after is None else min(stop_after, c.env_steps)
+    bar = tqdm(total=c.env_steps, initial=steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
     while steps < limit:
-        # 1. act ε-greedily in every copy
-        epsilon = linear_schedule(cfg.epsilon_start, cfg.epsilon_end, explore_steps, steps)
+        # 1. act ε-greedily in every copy (each seed's draws from its own generator)
+        epsilon = linear_schedule(c.epsilon_start, c.epsilon_end, explore_steps, steps)
         with torch.no_grad():
-            greedy = q(torch.from_numpy(obs).to(device)).argmax(-1).cpu().numpy()
-        explore = rng.random(cfg.num_envs) < epsilon
-        actions = np.where(explore, rng.integers(0, N_ACTIONS, cfg.num_envs), greedy)
-        next_obs, rewards, terminated, truncated, _ = env.step(actions)
-        # 2. store; truncation is not termination, so its next state is bootstrapped
-        buffer.add(obs, actions, rewards, next_obs, terminated)
-        done = terminated | truncated
-        stats.update(rewards, terminated, done)
-        obs = env.reset(options={"reset_mask": done})[0] if done.any() else next_obs
-        steps += cfg.num_envs
-        bar.update(cfg.num_envs)
+            greedy = q(torch.from_numpy(run.obs).to(device)).argmax(-1).cpu().numpy()
+        actions = np.stack([np.where(rng.random(c.num_envs) < epsilon, rng.integers(0, N_ACTIONS, c.num_envs), g)
+                            for rng, g in zip(run.rngs, greedy)])
+        # 2. store the transitions; finished copies restart
+        next_obs, _, _, done = run.step(actions)
+        run.restart(next_obs, done)
+        steps += c.num_envs
+        bar.update(c.num_envs)
         # 3. learn: one gradient step per `train_every` env steps, once the buffer has warmed up
-        if steps >= cfg.learning_starts:
-            due += cfg.num_envs / cfg.train_every
+        if steps >= c.learning_starts:
+            due += c.num_envs / c.train_every
             while due >= 1:
                 due -= 1
-                b = {k: torch.from_numpy(v).to(device) for k, v in buffer.sample(cfg.batch_size).items()}
+                b = run.sample(c.batch_size)
                 with torch.no_grad():
-                    td_target = b["rewards"] + cfg.gamma * target(b["next_obs"]).max(-1).values * (
-                        1 - b["terminated"])
-                value = q(b["obs"]).gather(1, b["actions"][:, None]).squeeze(1)
-                run.learn(F.mse_loss(value, td_target), cfg.target_period)
+                    td_target = b["rewards"] + c.gamma * target(b["next_obs"]).max(-1).values * (1 - b["terminated"])
+                value = q(b["obs"]).gather(-1, b["actions"][..., None]).squeeze(-1)
+                run.learn(F.mse_loss(value, td_target, reduction="none").mean(-1), c.target_period)
         # 4. one curve row per `log_every` env steps
-        if steps >= next_log or steps >= cfg.env_steps:
-            next_log += cfg.log_every
-            curve.append(run.curve_row(steps, epsilon))
-            bar.set_postfix(success=f"{curve[-1]['success']:.2f}", eps=f"{epsilon:.2f}")
+        if steps >= next_log or steps >= c.env_steps:
+            next_log += c.log_every
+            run.curve_rows(steps, epsilon)
+            bar.set_postfix(success=f"{run.curves[0][-1]['success']:.2f}", eps=f"{epsilon:.2f}")
     bar.close()
-    if steps < cfg.env_steps:
-        return run.pause(steps, obs, curve, due=due, next_log=next_log)
-    return run.result(steps, curve)
+    return finish(run, steps, cfg, due=due, next_log=next_log)
 
 
 class DQNAgent(OnlineAgent):

@@ -24,7 +24,8 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from hnsdt.baselines.online import OnlineAgent, OnlineConfig, OnlineRun, linear_schedule, start_run
+from hnsdt.baselines.online import (OnlineAgent, OnlineConfig, OnlineRun, finish, linear_schedule, seed_configs,
+                                    start_run)
 from hnsdt.envs.layout import Layout
 from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig
 
@@ -50,86 +51,90 @@ def choose_options(q: torch.Tensor, epsilon: float, rng: np.random.Generator) ->
     return np.where(rng.random(len(greedy)) < epsilon, rng.integers(0, q.shape[1], len(greedy)), greedy)
 
 
-def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: OptionCriticConfig, cfg: OptionsConfig,
-                  progress: bool = True, desc: str = "train", network: type = OptionCritic,
-                  state: OnlineRun | None = None, stop_after: int | None = None):
-    """``layout``: one map, or a list to draw from at every reset (then ``network`` reads views). Returns the
-    model, its curve and the data used; or, when ``stop_after`` env steps come before the end, the paused
-    :class:`OnlineRun`, which ``state`` continues."""
-    run = start_run(layout, max_steps, network, net_cfg, cfg, state)
-    rng, device, env, net, target = run.rng, run.device, run.env, run.net, run.target
-    obs, buffer, stats, steps, curve = run.obs, run.buffer, run.stats, run.steps, run.curve
-    rows = torch.arange(cfg.num_envs, device=device)
-    option = run.loop.get("option", np.zeros(cfg.num_envs, np.int64))
-    need_option = run.loop.get("need_option", np.ones(cfg.num_envs, bool))
-    next_log, lengths = run.loop.get("next_log", cfg.log_every), run.loop.get("lengths", [])
+def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: OptionCriticConfig,
+                  cfg: OptionsConfig | list[OptionsConfig], progress: bool = True, desc: str = "train",
+                  network: type = OptionCritic, state: OnlineRun | None = None, stop_after: int | None = None):
+    """``layout``: one map, or a list to draw from at every reset (then ``network`` reads views). ``cfg``: one
+    config, or one per seed of a stack trained in lockstep (:class:`OnlineRun`). Returns the model, its curve and
+    the data used (a list of them for a list of configs); or, when ``stop_after`` env steps come before the end,
+    the paused :class:`OnlineRun`, which ``state`` continues."""
+    cfgs = seed_configs(cfg)
+    c, n = cfgs[0], len(cfgs)
+    run = start_run(layout, max_steps, network, net_cfg, cfgs, state)
+    net, target, device, steps = run.net, run.target, run.device, run.steps
+    seed_rows = torch.arange(n, device=device)[:, None]  # (with copy_rows: each copy's option of each seed)
+    copy_rows = torch.arange(c.num_envs, device=device)[None, :]
+    option = run.loop.get("option", np.zeros((n, c.num_envs), np.int64))
+    need_option = run.loop.get("need_option", np.ones((n, c.num_envs), bool))
+    next_log, lengths = run.loop.get("next_log", c.log_every), run.loop.get("lengths", [[] for _ in cfgs])
     option_steps = run.loop.get("option_steps", 0)
-    explore_steps = int(cfg.exploration_fraction * cfg.env_steps)
-    limit = cfg.env_steps if stop_after is None else min(stop_after, cfg.env_steps)
-    bar = tqdm(total=cfg.env_steps, initial=steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
+    explore_steps = int(c.exploration_fraction * c.env_steps)
+    limit = c.env_steps if stop_after is None else min(stop_after, c.env_steps)
+    bar = tqdm(total=c.env_steps, initial=steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
     while steps < limit:
         # 1. pick options where the last one terminated, then an action from each copy's option
-        epsilon = linear_schedule(cfg.epsilon_start, cfg.epsilon_end, explore_steps, steps)
-        q, _, logits = net(torch.from_numpy(obs).to(device))
-        if need_option.any():
-            option = np.where(need_option, choose_options(q.detach(), epsilon, rng), option)
+        epsilon = linear_schedule(c.epsilon_start, c.epsilon_end, explore_steps, steps)
+        q, _, logits = net(torch.from_numpy(run.obs).to(device))
+        for i, rng in enumerate(run.rngs):
+            if need_option[i].any():
+                option[i] = np.where(need_option[i], choose_options(q[i].detach(), epsilon, rng), option[i])
         opt_t = torch.from_numpy(option).to(device)
-        pi_logits = logits[rows, opt_t]
-        actions = sample_categorical(pi_logits, rng)
-        next_obs, rewards, terminated, truncated, _ = env.step(actions)
-        done = terminated | truncated
-        buffer.add(obs, actions, rewards, next_obs, terminated, options=option)
-        stats.update(rewards, terminated, done)
+        pi_logits = logits[seed_rows, copy_rows, opt_t]
+        actions = np.stack([sample_categorical(pi_logits[i], rng) for i, rng in enumerate(run.rngs)])
+        next_obs, rewards, terminated, done = run.step(actions, options=option)
 
         # 2. actor: intra-option policy gradient and termination gradient on the current transitions
         next_t = torch.from_numpy(next_obs).to(device)
         q_next_online, beta_next, _ = net(next_t)
         r_t = torch.from_numpy(rewards.astype(np.float32)).to(device)
         term_t = torch.from_numpy(terminated.astype(np.float32)).to(device)
+        chosen_beta = beta_next[seed_rows, copy_rows, opt_t]
         with torch.no_grad():
             q_next = target(next_t)[0]
-            b = beta_next[rows, opt_t]
-            g = r_t + cfg.gamma * (1 - term_t) * ((1 - b) * q_next[rows, opt_t] + b * q_next.max(-1).values)
-            advantage = g - q[rows, opt_t]
-            margin = q_next_online[rows, opt_t] - q_next_online.max(-1).values + cfg.termination_reg
+            b = chosen_beta
+            g = r_t + c.gamma * (1 - term_t) * ((1 - b) * q_next[seed_rows, copy_rows, opt_t]
+                                                + b * q_next.max(-1).values)
+            advantage = g - q[seed_rows, copy_rows, opt_t]
+            margin = q_next_online[seed_rows, copy_rows, opt_t] - q_next_online.max(-1).values + c.termination_reg
         log_pi = F.log_softmax(pi_logits, -1)
         entropy = -(log_pi.exp() * log_pi).sum(-1)
-        chosen = log_pi.gather(1, torch.from_numpy(actions).to(device)[:, None]).squeeze(1)
-        policy_loss = -(chosen * advantage) - cfg.entropy_reg * entropy
-        termination_loss = beta_next[rows, opt_t] * margin * torch.from_numpy((~done).astype(np.float32)).to(device)
-        loss = (policy_loss + termination_loss).mean()
+        chosen = log_pi.gather(-1, torch.from_numpy(actions).to(device)[..., None]).squeeze(-1)
+        policy_loss = -(chosen * advantage) - c.entropy_reg * entropy
+        termination_loss = chosen_beta * margin * torch.from_numpy((~done).astype(np.float32)).to(device)
+        losses = (policy_loss + termination_loss).mean(-1)  # (seeds,)
 
         # 3. critic: replayed one-step targets through the option's termination
-        if steps >= cfg.learning_starts:
-            s = {k: torch.from_numpy(v).to(device) for k, v in buffer.sample(cfg.batch_size).items()}
-            idx = torch.arange(cfg.batch_size, device=device)
+        if steps >= c.learning_starts:
+            s = run.sample(c.batch_size)
+            idx = torch.arange(c.batch_size, device=device)[None, :]
             with torch.no_grad():
                 q_t = target(s["next_obs"])[0]
-                b_t = net(s["next_obs"])[1][idx, s["option"]]
-                y = s["rewards"] + cfg.gamma * (1 - s["terminated"]) * (
-                    (1 - b_t) * q_t[idx, s["option"]] + b_t * q_t.max(-1).values)
-            critic = net(s["obs"])[0][idx, s["option"]]
-            loss = loss + 0.5 * F.mse_loss(critic, y)
-        run.learn(loss, cfg.target_period)
+                b_t = net(s["next_obs"])[1][seed_rows, idx, s["option"]]
+                y = s["rewards"] + c.gamma * (1 - s["terminated"]) * (
+                    (1 - b_t) * q_t[seed_rows, idx, s["option"]] + b_t * q_t.max(-1).values)
+            critic = net(s["obs"])[0][seed_rows, idx, s["option"]]
+            losses = losses + 0.5 * F.mse_loss(critic, y, reduction="none").mean(-1)
+        run.learn(losses, c.target_period)
 
         # 4. options end by their termination draw or with the episode
-        ended = rng.random(cfg.num_envs) < beta_next[rows, opt_t].detach().cpu().numpy()
-        option_steps += cfg.num_envs
-        lengths.append(int((ended | done).sum()))
+        beta_chosen = chosen_beta.detach().cpu().numpy()
+        ended = np.stack([rng.random(c.num_envs) < beta for rng, beta in zip(run.rngs, beta_chosen)])
+        option_steps += c.num_envs
+        for seed_lengths, e, d in zip(lengths, ended, done):
+            seed_lengths.append(int((e | d).sum()))
         need_option = ended | done
-        obs = env.reset(options={"reset_mask": done})[0] if done.any() else next_obs
-        steps += cfg.num_envs
-        bar.update(cfg.num_envs)
-        if steps >= next_log or steps >= cfg.env_steps:
-            next_log += cfg.log_every
-            curve.append(run.curve_row(steps, epsilon, option_length=option_steps / max(sum(lengths), 1)))
-            lengths, option_steps = [], 0
-            bar.set_postfix(success=f"{curve[-1]['success']:.2f}", eps=f"{epsilon:.2f}")
+        run.restart(next_obs, done)
+        steps += c.num_envs
+        bar.update(c.num_envs)
+        if steps >= next_log or steps >= c.env_steps:
+            next_log += c.log_every
+            run.curve_rows(steps, epsilon, [{"option_length": option_steps / max(sum(seed_lengths), 1)}
+                                            for seed_lengths in lengths])
+            lengths, option_steps = [[] for _ in cfgs], 0
+            bar.set_postfix(success=f"{run.curves[0][-1]['success']:.2f}", eps=f"{epsilon:.2f}")
     bar.close()
-    if steps < cfg.env_steps:
-        return run.pause(steps, obs, curve, option=option, need_option=need_option, next_log=next_log,
-                         lengths=lengths, option_steps=option_steps)
-    return run.result(steps, curve)
+    return finish(run, steps, cfg, option=option, need_option=need_option, next_log=next_log, lengths=lengths,
+                  option_steps=option_steps)
 
 
 class OptionsAgent(OnlineAgent):

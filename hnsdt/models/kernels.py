@@ -59,11 +59,20 @@ def _matrix(t: torch.Tensor) -> np.ndarray:
     return t.detach().reshape(-1, t.shape[-1]).contiguous().numpy()
 
 
+def _rows(x: torch.Tensor, weight: torch.Tensor) -> np.ndarray:
+    """``x`` as the rows the product reads: (rows, k), or (stack, rows, k) for a stack of weights."""
+    if weight.dim() == 2:
+        return _matrix(x)
+    return x.detach().reshape(weight.shape[0], -1, x.shape[-1]).contiguous().numpy()
+
+
 def _forward(x, weight, bias) -> torch.Tensor:
-    y = _matrix(x) @ weight.detach().numpy().T
+    # a stack's products one matrix each (numpy's matmul runs one GEMM per matrix of the stack): each network of a
+    # stack gets the bytes it would get alone
+    y = np.matmul(_rows(x, weight), weight.detach().numpy().swapaxes(-1, -2))
     if bias is not None:
-        y += bias.detach().numpy()
-    return torch.from_numpy(y).reshape(*x.shape[:-1], weight.shape[0])
+        y += bias.detach().numpy()[..., None, :] if weight.dim() == 3 else bias.detach().numpy()
+    return torch.from_numpy(y).reshape(*x.shape[:-1], weight.shape[-2])
 
 
 class _Linear(torch.autograd.Function):
@@ -75,15 +84,23 @@ class _Linear(torch.autograd.Function):
     @staticmethod
     def backward(ctx, grad):
         x, weight = ctx.saved_tensors
-        g = _matrix(grad)
-        grad_x = torch.from_numpy(g @ weight.numpy()).reshape(x.shape) if ctx.needs_input_grad[0] else None
-        grad_w = torch.from_numpy(g.T @ _matrix(x)) if ctx.needs_input_grad[1] else None
-        grad_b = torch.from_numpy(g.sum(0)) if ctx.needs_input_grad[2] else None  # (False without a bias)
+        g = _rows(grad, weight)
+        grad_x = torch.from_numpy(np.matmul(g, weight.numpy())).reshape(x.shape) if ctx.needs_input_grad[0] else None
+        grad_w = torch.from_numpy(np.matmul(g.swapaxes(-1, -2), _rows(x, weight))) if ctx.needs_input_grad[1] else None
+        grad_b = torch.from_numpy(g.sum(-2)) if ctx.needs_input_grad[2] else None  # (False without a bias)
         return grad_x, grad_w, grad_b
 
 
 def linear(x: torch.Tensor, weight: torch.Tensor, bias: torch.Tensor | None = None) -> torch.Tensor:
-    """``F.linear(x, weight, bias)``, on OpenBLAS for CPU tensors (float32 or float64)."""
+    """``F.linear(x, weight, bias)``, on OpenBLAS for CPU tensors (float32 or float64). A stack of weights (S, out,
+    in) and biases (S, out), several networks' layers side by side (:func:`hnsdt.baselines.online.stack_networks`), maps
+    (S, …, in) to (S, …, out), each network's inputs through its own weights."""
+    if weight.dim() == 3:  # (autograd or not: one path; torch has no stacked linear)
+        if x.device.type != "cpu":
+            y = torch.matmul(x.reshape(weight.shape[0], -1, x.shape[-1]), weight.transpose(-1, -2))
+            return (y if bias is None else y + bias[:, None, :]).reshape(*x.shape[:-1], weight.shape[-2])
+        check_blas_core()
+        return _Linear.apply(x, weight, bias)
     if x.device.type != "cpu":
         return F.linear(x, weight, bias)
     check_blas_core()

@@ -88,5 +88,5 @@ class OptionCritic(StateFeatures, Network, arch="option_critic", config=OptionCr
     def forward(self, states: torch.Tensor):
         """Q_Ω (B, K), β (B, K) in (0, 1), policy logits (B, K, 5)."""
         x = self.body(self.features(states))
-        logits = self.policy_head(x).view(-1, self.cfg.n_options, N_ACTIONS)
+        logits = self.policy_head(x).view(*x.shape[:-1], self.cfg.n_options, N_ACTIONS)
         return self.q_head(x), torch.sigmoid(self.termination_head(x)), logits
