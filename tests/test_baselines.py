@@ -116,9 +116,10 @@ def test_options_learns_to_cross_a_room(params):
     random_success = _success(room, RandomAgent(0), horizon=20)
     settings = baseline_settings(params, "options", "keydoor", 0)
     successes = []
-    for seed in range(3):
-        cfg = replace(settings.train, env_steps=10_000, learning_starts=500, seed=seed)
-        model, curve, usage = train_options(room, 20, replace(settings.model, n_flags=room.n_flags), cfg, progress=False)
+    cfgs = [replace(settings.train, env_steps=10_000, learning_starts=500, seed=seed) for seed in range(3)]
+    # (the three seeds as one stack: each the bytes of its run alone, test_seeds_trained_as_a_stack_…)
+    for model, curve, usage in train_options(room, 20, replace(settings.model, n_flags=room.n_flags), cfgs,
+                                             progress=False):
         assert usage["env_steps"] == 10_000 and curve[-1]["success"] > curve[0]["success"]
         successes.append(_success(room, OptionsAgent(model, seed=0), horizon=20))
     assert random_success < 0.1
