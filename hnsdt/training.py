@@ -33,7 +33,7 @@ class TrainTask:
     data: Any  # offline: the dataset's frames; online: (layout or layouts, max_steps)
     facts: dict  # what goes into the checkpoint besides the configs
     progress: bool = False  # a progress bar (when it runs in the stage's process)
-    split: bool = False  # hand back the state part-way (seeds that share workers; :func:`pause_at`)
+    split: bool = False  # hand back the state part-way (dataset learners sharing workers; :func:`pause_at`)
     state: Any = None  # where a split run continues from
     measure: Any = None  # the validation measure when not the held-out loss (:class:`StepsToExit`)
 
@@ -227,27 +227,25 @@ def _trained(task: TrainTask, model, curve: list[dict], usage: dict):
 
 
 def train_run(task: TrainTask | SeedStack):
-    """Train one seed: ``(model, checkpoint facts, curve)``; a :class:`SeedStack`, a list of them. With
-    ``task.split``, it stops part-way (:func:`pause_at`) and returns :class:`~hnsdt.core.compute.Continue` with
-    its state (a :class:`~hnsdt.models.fit.FitState`): the executor queues the rest behind the other seeds'
-    parts, so 5 seeds on 2 workers take about 2.5 seed-times, not 3, and the weights are the same bytes as in
-    one go (tested)."""
+    """Train one seed: ``(model, checkpoint facts, curve)``; a :class:`SeedStack`, a list of them (an online
+    learner's seed alone is a stack of one). With ``task.split``, a dataset learner stops part-way
+    (:func:`pause_at`) and returns :class:`~hnsdt.core.compute.Continue` with its state (a
+    :class:`~hnsdt.models.fit.FitState`): the executor queues the rest behind the other seeds' parts, so 5 seeds
+    on 2 workers take about 2.5 seed-times, not 3, and the weights are the same bytes as in one go (tested)."""
     from hnsdt.core.compute import Continue
 
-    if isinstance(task, SeedStack):
-        first, runs = task.runs[0], task.runs
-        trainer = resolve(METHODS[first.method].trainer)
+    runs = task.runs if isinstance(task, SeedStack) else (task,)
+    first = runs[0]
+    trainer, network = resolve(METHODS[first.method].trainer), network_for(first.method, first.model_cfg)
+    if METHODS[first.method].training == "online":  # on (layout(s), max_steps), every seed of the stack at once
         out = trainer(*first.data, first.model_cfg, [r.train_cfg for r in runs], progress=first.progress,
-                      desc=f"{first.method} seeds {', '.join(str(r.seed) for r in runs)}",
-                      network=network_for(first.method, first.model_cfg))
-        return [_trained(run, *result) for run, result in zip(runs, out)]
-    method, model_cfg = task.method, task.model_cfg
-    online = METHODS[method].training == "online"
-    trainer = resolve(METHODS[method].trainer)
-    args = task.data if online else (task.data,)  # online: (layout(s), max_steps)
+                      desc=f"{first.method} seed {', '.join(str(r.seed) for r in runs)}", network=network)
+        results = [_trained(run, *result) for run, result in zip(runs, out)]
+        return results if isinstance(task, SeedStack) else results[0]
     extra = {"measure": task.measure} if task.measure is not None else {}  # (DTs; offline baselines with patience)
-    out = trainer(*args, model_cfg, task.train_cfg, progress=task.progress, desc=f"{method} seed {task.seed}",
-                  network=network_for(method, model_cfg), state=task.state, stop_after=pause_at(task), **extra)
+    out = trainer(task.data, task.model_cfg, task.train_cfg, progress=task.progress,
+                  desc=f"{task.method} seed {task.seed}", network=network, state=task.state,
+                  stop_after=pause_at(task), **extra)
     if not isinstance(out, tuple):  # paused part-way
         return Continue(replace(task, state=out))
     return _trained(task, *out)
