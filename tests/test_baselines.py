@@ -131,14 +131,16 @@ def _stack_or_alone(learner, layout, seeds):
     results, each a list of (model, curve, usage)."""
     from hnsdt.models.view import ViewOptionCritic, ViewOptionCriticConfig
 
+    # sizes that are no multiple of a vector's width: torch computes a tensor's last few elements on another code
+    # path than the rest (option-critic's sigmoid rounds otherwise there), and a stack moves them
+    knobs = dict(env_steps=600, learning_starts=200, batch_size=37, num_envs=5, target_period=20)
     if learner == "dqn":
-        net, train, network = QNetworkConfig(layout.n_flags, *layout.shape, hidden=16), train_dqn, QNetwork
-        cfgs = [DQNConfig(env_steps=800, learning_starts=200, batch_size=32, target_period=20, seed=s) for s in seeds]
+        net, train, network = QNetworkConfig(layout.n_flags, *layout.shape, hidden=13), train_dqn, QNetwork
+        cfgs = [DQNConfig(**knobs, seed=s) for s in seeds]
     else:  # on views of generated maps, a new one at every reset
-        net = ViewOptionCriticConfig(layout[0].n_flags, 0, 0, hidden=16, view_radius=2)
+        net = ViewOptionCriticConfig(layout[0].n_flags, 0, 0, hidden=13, n_options=3, view_radius=2)
         train, network = train_options, ViewOptionCritic
-        cfgs = [OptionsConfig(env_steps=800, learning_starts=200, batch_size=32, target_period=20, seed=s)
-                for s in seeds]
+        cfgs = [OptionsConfig(**knobs, seed=s) for s in seeds]
     stacked = train(layout, 30, net, cfgs, progress=False, network=network)
     return stacked, [train(layout, 30, net, cfg, progress=False, network=network) for cfg in cfgs]
 

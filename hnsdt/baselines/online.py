@@ -117,8 +117,10 @@ def stack_networks(nets: list[nn.Module]) -> nn.Module:
     """Networks of one architecture as one network whose every parameter is the stack (S, …) of theirs: a forward
     maps inputs (S, …) to outputs (S, …), each network's slice through its own weights. Every layer with weights
     must be a :class:`~hnsdt.models.kernels.Linear`, whose stacked products are one GEMM per network (so each gets
-    the bytes it would get alone; the rest of a value network is elementwise or row by row)."""
+    the bytes it would get alone; the rest of a value network is elementwise or row by row, and a network whose
+    elementwise op rounds by position reads ``stack_size``, e.g. option-critic's sigmoid)."""
     stacked = copy.deepcopy(nets[0])
+    stacked.stack_size = len(nets)
     for module in stacked.modules():
         if any(True for _ in module.parameters(recurse=False)) and not isinstance(module, Linear):
             raise TypeError(f"{type(module).__name__} has weights but is no kernels.Linear: it cannot be stacked")

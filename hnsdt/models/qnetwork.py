@@ -89,4 +89,11 @@ class OptionCritic(StateFeatures, Network, arch="option_critic", config=OptionCr
         """Q_Ω (B, K), β (B, K) in (0, 1), policy logits (B, K, 5)."""
         x = self.body(self.features(states))
         logits = self.policy_head(x).view(*x.shape[:-1], self.cfg.n_options, N_ACTIONS)
-        return self.q_head(x), torch.sigmoid(self.termination_head(x)), logits
+        return self.q_head(x), _sigmoid(self.termination_head(x), getattr(self, "stack_size", 0)), logits
+
+
+def _sigmoid(x: torch.Tensor, stack_size: int) -> torch.Tensor:
+    """``torch.sigmoid``; in a stack of networks (:func:`hnsdt.baselines.online.stack_networks`), one call per
+    network: torch computes a tensor's last few elements on another code path than the rest, with other last bits,
+    and each network must get the bytes it gets alone."""
+    return torch.stack([torch.sigmoid(part) for part in x]) if stack_size else torch.sigmoid(x)
