@@ -133,7 +133,7 @@ def _stack_or_alone(learner, layout, seeds):
 
     # sizes that are no multiple of a vector's width: torch computes a tensor's last few elements on another code
     # path than the rest (option-critic's sigmoid rounds otherwise there), and a stack moves them
-    knobs = dict(env_steps=600, learning_starts=200, batch_size=37, num_envs=5, target_period=20)
+    knobs = dict(env_steps=400, learning_starts=200, batch_size=37, num_envs=5, target_period=20)
     if learner == "dqn":
         net, train, network = QNetworkConfig(layout.n_flags, *layout.shape, hidden=13), train_dqn, QNetwork
         cfgs = [DQNConfig(**knobs, seed=s) for s in seeds]
