@@ -262,15 +262,13 @@ def train_all(runs: list[TrainTask], env: str, out: Path, curves: Path, compute,
 
     inline = compute.executor == "local" and compute.local_workers(len(runs)) == 1
     method = runs[0].method
-    desc = f"train {env} {method}"
+    online = METHODS[method].training == "online"
+    tasks = [replace(r, progress=progress and inline) for r in runs]
     # seeds paused part-way where they share workers (in one process a pause would only cost a model rebuild)
-    tasks = [replace(r, progress=progress and inline, split=not inline) for r in runs]
-    if METHODS[method].training == "online":
-        stacks = seed_stacks([replace(t, split=False) for t in tasks], compute)
-        results = [r for stack in run_tasks(train_run, stacks, compute, desc=desc, progress=progress and not inline)
-                   for r in stack]
-    else:
-        results = run_tasks(train_run, tasks, compute, desc=desc, progress=progress and not inline)
+    tasks = seed_stacks(tasks, compute) if online else [replace(t, split=not inline) for t in tasks]
+    results = run_tasks(train_run, tasks, compute, desc=f"train {env} {method}", progress=progress and not inline)
+    if online:
+        results = [result for stack in results for result in stack]
     with atomic_dir(out) as staging, atomic_dir(curves) as curve_staging:
         staging.mkdir()
         curve_staging.mkdir()

@@ -88,10 +88,9 @@ def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: Option
         q_next_online, beta_next, _ = net(next_t)
         r_t = torch.from_numpy(rewards.astype(np.float32)).to(device)
         term_t = torch.from_numpy(terminated.astype(np.float32)).to(device)
-        chosen_beta = beta_next[seed_rows, copy_rows, opt_t]
+        b = beta_next[seed_rows, copy_rows, opt_t]  # β of each copy's option in the state it reached
         with torch.no_grad():
             q_next = target(next_t)[0]
-            b = chosen_beta
             g = r_t + c.gamma * (1 - term_t) * ((1 - b) * q_next[seed_rows, copy_rows, opt_t]
                                                 + b * q_next.max(-1).values)
             advantage = g - q[seed_rows, copy_rows, opt_t]
@@ -100,7 +99,7 @@ def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: Option
         entropy = -(log_pi.exp() * log_pi).sum(-1)
         chosen = log_pi.gather(-1, torch.from_numpy(actions).to(device)[..., None]).squeeze(-1)
         policy_loss = -(chosen * advantage) - c.entropy_reg * entropy
-        termination_loss = chosen_beta * margin * torch.from_numpy((~done).astype(np.float32)).to(device)
+        termination_loss = b * margin * torch.from_numpy((~done).astype(np.float32)).to(device)
         losses = (policy_loss + termination_loss).mean(-1)  # (seeds,)
 
         # 3. critic: replayed one-step targets through the option's termination
@@ -117,8 +116,7 @@ def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: Option
         run.learn(losses, c.target_period)
 
         # 4. options end by their termination draw or with the episode
-        beta_chosen = chosen_beta.detach().cpu().numpy()
-        ended = np.stack([rng.random(c.num_envs) < beta for rng, beta in zip(run.rngs, beta_chosen)])
+        ended = np.stack([rng.random(c.num_envs) < beta for rng, beta in zip(run.rngs, b.detach().cpu().numpy())])
         option_steps += c.num_envs
         for seed_lengths, e, d in zip(lengths, ended, done):
             seed_lengths.append(int((e | d).sum()))

@@ -12,6 +12,7 @@ class Network(nn.Module):
 
     arch: str
     config_class: type
+    stack_size: int = 0  # > 0: the parameters are a stack of that many networks' (hnsdt.baselines.online)
 
     def __init_subclass__(cls, arch: str, config: type, **kwargs):
         super().__init_subclass__(**kwargs)

@@ -89,7 +89,7 @@ class OptionCritic(StateFeatures, Network, arch="option_critic", config=OptionCr
         """Q_Ω (B, K), β (B, K) in (0, 1), policy logits (B, K, 5)."""
         x = self.body(self.features(states))
         logits = self.policy_head(x).view(*x.shape[:-1], self.cfg.n_options, N_ACTIONS)
-        return self.q_head(x), _sigmoid(self.termination_head(x), getattr(self, "stack_size", 0)), logits
+        return self.q_head(x), _sigmoid(self.termination_head(x), self.stack_size), logits
 
 
 def _sigmoid(x: torch.Tensor, stack_size: int) -> torch.Tensor:
