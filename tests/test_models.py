@@ -257,6 +257,26 @@ def test_banded_attention_block_by_block_is_the_band_masked_attention(T):
         assert torch.allclose(banded_layer(layer, x, 8), layer(x, src_mask=band_mask(T, 8)), atol=1e-5)
 
 
+@pytest.mark.parametrize("condition", ["subgoal", "return", "none"])
+def test_episodes_packed_end_to_end_compute_what_they_compute_padded(condition):
+    """Training packs a batch's real steps into one sequence (no padding computed), attention kept within each
+    episode: the logits of the real steps are the padded batch's, episodes of 1 step, shorter than h and
+    crossing blocks included, and a pad's logits are 0; so does the loss."""
+    cfg = _cfg(condition, formulation="episode", context=4)
+    torch.manual_seed(0)
+    model = DecisionTransformer(cfg).eval()
+    b = _episode(cfg, B=5, T=11)
+    lengths = torch.tensor([3, 11, 1, 7, 9])
+    steps = torch.arange(11)[None] < lengths[:, None]
+    with torch.no_grad():
+        padded = model(b["states"], b["actions"], b["timesteps"], None, **_episode_cond(cfg, b))
+        packed = model(b["states"], b["actions"], b["timesteps"], None, **_episode_cond(cfg, b), steps=steps)
+        assert torch.allclose(packed[steps], padded[steps], atol=1e-5)
+        assert not packed[~steps].any()
+        batch = {**b, **_episode_cond(cfg, b), "loss_mask": steps}
+        assert torch.allclose(model.loss({**batch, "steps": steps}), model.loss(batch), atol=1e-6)
+
+
 def test_episode_attention_reaches_back_context_steps_per_layer():
     """With one layer, step t reads steps t - h + 1 .. t: a change h steps back is invisible, h - 1 back is not."""
     cfg = _cfg("return", formulation="episode", n_layers=1)

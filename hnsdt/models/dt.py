@@ -164,15 +164,25 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
             x = x + self.return_proj(returns[..., None] / cfg.return_scale)
         return x
 
-    def forward_episode(self, states, actions, timesteps, subgoal_ids=None, subgoal_targets=None, returns=None):
+    def forward_episode(self, states, actions, timesteps, subgoal_ids=None, subgoal_targets=None, returns=None,
+                        steps=None):
         """Action logits (B, T, 5) of whole episodes (right-padded: causal attention never reads a later pad);
-        subgoal_ids (B, T), subgoal_targets (B, T, 2), returns (B, T): each step's own."""
+        subgoal_ids (B, T), subgoal_targets (B, T, 2), returns (B, T): each step's own. ``steps`` (B, T) bool,
+        the real steps: the episodes are packed end to end into one sequence first, attention kept within
+        each, so no padding is computed (the logits of pads are then 0)."""
         prev = torch.full_like(actions, NO_ACTION)
         prev[:, 1:] = actions[:, :-1]
-        x = self.drop(self.step_tokens(states, prev, timesteps, subgoal_ids, subgoal_targets, returns))
+        inputs, segments = (states, prev, timesteps, subgoal_ids, subgoal_targets, returns), None
+        if steps is not None:
+            segments = torch.arange(len(steps), device=steps.device)[:, None].expand_as(steps)[steps][None]
+            inputs = [None if t is None else t[steps][None] for t in inputs]
+        x = self.drop(self.step_tokens(*inputs))
         for layer in self.blocks.layers:
-            x = banded_layer(layer, x, self.cfg.context)
-        return _head(self, x)
+            x = banded_layer(layer, x, self.cfg.context, segments)
+        logits = _head(self, x)
+        if steps is None:
+            return logits
+        return logits.new_zeros(*steps.shape, logits.shape[-1]).masked_scatter(steps[..., None], logits[0])
 
     def start(self, n: int) -> "StepCache":
         """An empty key/value cache for ``n`` episodes (episode formulation, eval mode)."""
@@ -191,7 +201,8 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
             x = cached_layer(layer, x, cache.keys[i], cache.values[i], rows, slot, mask)
         return _head(self, x)
 
-    def forward(self, states, actions, timesteps, pad, subgoal_ids=None, subgoal_targets=None, returns=None):
+    def forward(self, states, actions, timesteps, pad, subgoal_ids=None, subgoal_targets=None, returns=None,
+                steps=None):
         """Action logits (B, h, 5), one per state of the window (episode formulation: per step of the episode,
         each conditioning argument per step, ``pad`` unused).
 
@@ -199,10 +210,10 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         pad (B, h) bool marks steps before the episode began (windows are left-padded); subgoal_ids (B,) and
         subgoal_targets (B, 2) for ``subgoal``; returns (B, h) float for ``return``; neither for ``none``.
         Padded steps become a learned pad token, identically in training and at inference, so no attention mask
-        is needed."""
+        is needed. ``steps``: the episode formulation's real steps, packed (:meth:`forward_episode`)."""
         cfg = self.cfg
         if cfg.formulation == "episode":
-            return self.forward_episode(states, actions, timesteps, subgoal_ids, subgoal_targets, returns)
+            return self.forward_episode(states, actions, timesteps, subgoal_ids, subgoal_targets, returns, steps)
         B, h = actions.shape
         time = self.time_emb(timesteps.clamp(0, cfg.max_timestep))
         keep = (~pad)[..., None].float()
@@ -238,7 +249,7 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
 
     def loss(self, batch: dict) -> torch.Tensor:
         logits = self(batch["states"], batch["actions"], batch["timesteps"], batch.get("pad"), batch.get("subgoal_ids"),
-                      batch.get("subgoal_targets"), batch.get("returns"))
+                      batch.get("subgoal_targets"), batch.get("returns"), batch.get("steps"))
         nll = F.cross_entropy(logits.reshape(-1, N_ACTIONS), batch["actions"].reshape(-1), reduction="none")
         mask = batch["loss_mask"].reshape(-1).float()
         return (nll * mask).sum() / mask.sum().clamp(min=1.0)
@@ -262,28 +273,41 @@ def _block_mask(blocks: int, context: int, device) -> torch.Tensor:
     return mask
 
 
-def banded_attention(q, k, v, context: int, dropout_p: float = 0.0) -> torch.Tensor:
+def banded_attention(q, k, v, context: int, dropout_p: float = 0.0, segments=None) -> torch.Tensor:
     """Causal attention to the last ``context`` steps of (B, heads, T, d) queries, keys and values, computed
     block by block: the steps are cut into blocks of h, and each block's queries attend to the keys of that
     block and the one before (2h keys, masked to each query's own h) — 2h·T scores instead of the T² that
     :func:`band_mask` over the whole episode computes and mostly masks away. The same numbers up to rounding
-    (tested)."""
+    (tested). ``segments`` (B, T): each step's episode, when several lie end to end in a row; a step attends to
+    its own episode's only."""
     B, H, T, d = q.shape
     blocks = -(-T // context)
     if blocks * context != T:  # right-pad to whole blocks: the pad comes after every real step, never read
         q, k, v = (F.pad(t, (0, 0, 0, blocks * context - T)) for t in (q, k, v))
     q, k, v = (t.view(B, H, blocks, context, d) for t in (q, k, v))
-    k, v = (torch.cat([F.pad(t[:, :, :-1], (0, 0, 0, 0, 1, 0)), t], dim=3) for t in (k, v))  # (previous, own)
-    out = attention(q, k, v, _block_mask(blocks, context, q.device), dropout_p)
+    k, v = (_previous_and_own(t, dim=3) for t in (k, v))
+    mask = _block_mask(blocks, context, q.device)
+    if segments is not None:  # (pads: segment -1, their own, so that no row of scores is all masked)
+        own = F.pad(segments, (0, blocks * context - T), value=-1).view(B, blocks, context)
+        other = own[..., :, None] != _previous_and_own(own[..., None], dim=2)[..., 0][..., None, :]
+        mask = (torch.zeros(other.shape, device=q.device).masked_fill(other, float("-inf")) + mask)[:, None]
+    out = attention(q, k, v, mask, dropout_p)
     return out.reshape(B, H, blocks * context, d)[:, :, :T]
 
 
-def banded_layer(layer: nn.TransformerEncoderLayer, x, context: int) -> torch.Tensor:
+def _previous_and_own(t: torch.Tensor, dim: int) -> torch.Tensor:
+    """Blocks (along ``dim - 1``) of ``t`` each joined along ``dim`` to the block before (zeros before block 0)."""
+    before = [0, 0] * (t.dim() - dim) + [1, 0]  # F.pad's (last dim first) pairs: one block in front along dim - 1
+    return torch.cat([F.pad(t.narrow(dim - 1, 0, t.shape[dim - 1] - 1), before), t], dim=dim)
+
+
+def banded_layer(layer: nn.TransformerEncoderLayer, x, context: int, segments=None) -> torch.Tensor:
     """One pre-norm encoder layer on whole (B, T, d) episodes, attention limited to the last ``context`` steps
-    (:func:`banded_attention`); dropout where ``layer`` applies it, in training mode."""
+    (:func:`banded_attention`, within each episode of ``segments``); dropout where ``layer`` applies it, in
+    training mode."""
     B, T, d = x.shape
     q, k, v = _qkv(layer, x).permute(2, 0, 3, 1, 4)  # (B, heads, T, d / heads) each
-    out = banded_attention(q, k, v, context, layer.self_attn.dropout if layer.training else 0.0)
+    out = banded_attention(q, k, v, context, layer.self_attn.dropout if layer.training else 0.0, segments)
     out = _apply(layer.self_attn.out_proj, out.transpose(1, 2).reshape(B, T, d))
     return _feed_forward(layer, x + layer.dropout1(out))
 

@@ -143,7 +143,7 @@ def make_episodes(frames: Frames, starts: np.ndarray, lengths: np.ndarray, condi
     real = steps[None, :] < lengths[:, None]
     idx = np.where(real, starts[:, None] + steps[None, :], starts[:, None])  # pads read the first frame
     batch = {"states": frames.states[idx], "actions": frames.actions[idx], "timesteps": frames.timestep[idx],
-             "loss_mask": real}
+             "loss_mask": real, "steps": real}  # steps: the real ones, which the model packs (DecisionTransformer)
     if condition == "subgoal":
         batch["subgoal_ids"] = frames.subgoals[idx]
         batch["subgoal_targets"] = frames.targets[idx]
