@@ -26,8 +26,8 @@ Two formulations (``formulation``) of what one training example and one decision
   The sub-goal token leads the window and conditions every step in it.
 * ``"episode"``: an example is a whole episode, attention limited to the last h steps (sliding-window
   attention, computed block by block: :func:`banded_attention`), so every step's prediction comes out of one
-  pass and each step is computed once;
-  at inference a key/value cache of the last h steps makes a decision one new token
+  pass and each step is computed once (a training batch's episodes packed end to end, so no padding is
+  computed: :meth:`DecisionTransformer.forward_episode`); at inference a key/value cache of the last h steps makes a decision one new token
   (:meth:`DecisionTransformer.step`). Each step token carries its own conditioning (its sub-goal and target,
   or its return-to-go) instead of one leading token; a step sees h steps back per layer, so through L layers
   information reaches L·(h − 1) steps back, where a window cuts it at h. ``"step"`` tokens only.
