@@ -54,13 +54,21 @@ class StepsToExit:
     better; it reads the success and the steps the evaluation reports, on states no training episode contains:
     drawn from the held-out episodes of the method's map (:meth:`from_held_out`), or on validation layouts no
     training episode saw (:meth:`on_layouts`, the unseen-layout experiment). Deterministic: greedy agents, no
-    failures."""
+    failures. Its ``floor`` is the exact optimum's mean from the same states: no model can do better, so a
+    model that reaches it ends training (:class:`hnsdt.models.fit.Validation`)."""
 
     method: str
     executor: Any  # the method's ExecutorConfig
     facts: dict  # the checkpoint's facts the agent reads (the pure DT's target return)
     courses: tuple[Course, ...]
     name: str = "steps"
+
+    @property
+    def floor(self) -> float:
+        from hnsdt.envs.oracle import mdp_for
+
+        return float(np.mean(np.concatenate([mdp_for(c.layout).fewest_steps(c.starts, c.max_steps)
+                                             for c in self.courses])))
 
     @classmethod
     def from_held_out(cls, frames, held_out: np.ndarray, n: int, method: str, env: EnvSpec, executor,

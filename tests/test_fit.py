@@ -149,6 +149,39 @@ def test_validation_stops_at_the_plateau_and_keeps_the_best_epoch(frames, keydoo
         assert torch.equal(value, snapshots[2][name]), name
 
 
+def test_a_measure_at_its_floor_ends_training_at_once_with_the_weights_a_longer_run_keeps(frames, keydoor):
+    """A measure that reaches its floor (no model can do better: the optimum's steps) stops after that epoch,
+    keeping the weights the patience rule would have kept after more epochs."""
+    from hnsdt.models.fit import Validation
+
+    class Steps:  # measured after each epoch: 5.0, 4.0 (= the floor), then 4.0 again
+        floor = 4.0
+
+        def __init__(self):
+            self.values = iter([5.0, 4.0, 4.0, 4.0])
+
+        def __call__(self, model):
+            return next(self.values)
+
+    cfg = DTConfig("return", keydoor.n_flags, *keydoor.shape, context=4, n_layers=1, d_model=32, max_timestep=100,
+                   formulation="episode")
+    runs = {}
+    for floor in (True, False):
+        measure = Steps()
+        if not floor:
+            measure.floor = float("-inf")
+        validation = Validation(measure, patience=2)
+        runs[floor] = validation, train_dt(frames, cfg, TrainConfig(epochs=10, batch_size=32, seed=2), progress=False,
+                                           validation=validation)[0]
+    (at_floor, short), (patient, long) = runs[True], runs[False]
+    assert [h["epoch"] for h in at_floor.history] == [1, 2] and at_floor.stopped_early
+    assert [h["epoch"] for h in patient.history] == [1, 2, 3, 4]
+    assert at_floor.best_epoch == patient.best_epoch == 2
+    assert at_floor.record("steps")["validation_floor"] == 4.0 and "validation_floor" not in patient.record("steps")
+    for (name, a), b in zip(short.state_dict().items(), long.state_dict().values()):
+        assert torch.equal(a, b), name
+
+
 def test_a_validated_run_stopped_and_continued_elsewhere_is_the_run_in_one_go(frames, keydoor):
     """The validation record and the best epoch's weights travel in the state too."""
     from hnsdt.models.train import train_decision_transformer

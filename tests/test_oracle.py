@@ -4,7 +4,7 @@ import pytest
 from hnsdt.agents import SymbolicAgent, rollout
 from hnsdt.envs import KeyDoorVectorEnv, load_layout
 from hnsdt.envs.oracle import MDP, optimum
-from hnsdt.symbolic import SymbolicState, plan, plan_cost
+from hnsdt.symbolic import NoPlanError, SymbolicState, plan, plan_cost
 
 
 def test_state_counts_match_the_paper_layouts(keydoor, multikeydoor):
@@ -46,6 +46,30 @@ def test_optimum_at_fail_zero_equals_the_cheapest_plan(name, max_steps):
     layout = load_layout(name)
     opt = optimum(layout, 0.0, max_steps)
     assert opt.steps == plan_cost(plan(layout, SymbolicState.initial(layout), "cost"))
+
+
+@pytest.mark.parametrize("name", ["keydoor_5x5", "multikeydoor_9x9"])
+def test_fewest_steps_from_any_state_is_the_cheapest_plans_cost(name):
+    """From every state the planner can solve, the fewest steps at fail 0 are its cheapest plan's cost (the
+    floor of a validation by acting); capped at the horizon; a wall cell is refused."""
+    layout = load_layout(name)
+    mdp = MDP(layout)
+    pick = np.random.default_rng(0).choice(len(mdp), size=40, replace=False)
+    states, done = mdp.states[pick], mdp.done[pick]
+    fewest = mdp.fewest_steps(states, 250)
+    assert (fewest[done] == 0).all()
+    for state, steps in zip(states[~done], fewest[~done]):
+        try:
+            cost = plan_cost(plan(layout, SymbolicState.from_observation(layout, state), "cost"))
+        except NoPlanError:  # (a key used up on the wrong door): no policy succeeds either
+            assert steps == 250
+            continue
+        assert steps == cost
+    assert (mdp.fewest_steps(states, 3) == np.minimum(fewest, 3)).all()
+    wall = next((r, c) for r in range(layout.shape[0]) for c in range(layout.shape[1])
+                if (r, c) not in set(map(tuple, layout.free_cells())))
+    with pytest.raises(ValueError, match="not one of the layout's"):
+        mdp.fewest_steps(np.array([[*wall] + [0] * layout.n_flags]), 10)
 
 
 def test_symbolic_agent_is_near_optimal_in_expectation(keydoor):

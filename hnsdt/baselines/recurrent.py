@@ -91,8 +91,7 @@ def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTr
     usage = {"dataset_frames": int(lengths.sum()), "dataset_episodes": int(len(starts)), "frames_seen": seen,
              "gradient_steps": step, "epochs": round(seen / int(lengths.sum()), 3)}
     if validation is not None:  # the budget the evidence chose
-        usage |= {"best_epoch": validation.best_epoch, "stopped_early": validation.stopped_early,
-                  f"validation_{getattr(measure, 'name', 'steps')}": validation.history}
+        usage |= validation.record(getattr(measure, "name", "steps"))
     return model, curve, usage
 
 

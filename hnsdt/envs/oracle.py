@@ -99,6 +99,23 @@ class MDP:
         return Optimum(success=float(v_succ[s]), ret=float(v_ret[s]), steps=float(steps))
 
 
+    def fewest_steps(self, states: np.ndarray, horizon: int) -> np.ndarray:
+        """Per state of ``states``: the fewest steps to success with no failures (``horizon`` where success takes
+        longer or is impossible), the least episode length any policy can have from it at fail_prob 0."""
+        dist = np.where(self.done, 0, horizon).astype(np.int64)
+        for _ in range(horizon):  # Bellman-Ford on unit steps: stable after the longest shortest path
+            new = np.where(self.done, 0, np.minimum(dist, 1 + dist[self.succ].min(axis=1)))
+            if np.array_equal(new, dist):
+                break
+            dist = new
+        own, codes = self._codes(self.states), self._codes(np.asarray(states, dtype=np.int64))
+        order = np.argsort(own)
+        at = order[np.minimum(np.searchsorted(own[order], codes), len(own) - 1)]
+        if not np.array_equal(own[at], codes):
+            raise ValueError("fewest_steps: a state that is not one of the layout's (a wall cell, or flags it has not)")
+        return dist[at]
+
+
 @lru_cache(maxsize=16)
 def mdp_for(layout: Layout) -> MDP:
     return MDP(layout)

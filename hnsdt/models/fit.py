@@ -44,13 +44,25 @@ class Validation:
     """Training that stops on evidence: after every complete epoch ``measure(model)`` (lower is better; called in
     eval mode, it must not draw random numbers) is recorded in ``history``; once it has not improved for
     ``patience`` epochs training stops, and the model is the best epoch's (``best_epoch``). The epochs
-    :func:`fit` is given are the cap."""
+    :func:`fit` is given are the cap. A measure with a ``floor`` (the best value any model can have, e.g. the
+    optimum's steps) stops training as soon as an epoch reaches it: later epochs could not replace it."""
 
     measure: Callable[[torch.nn.Module], float]
     patience: int
     history: list[dict] = field(default_factory=list)  # {"epoch", "step", "value"} per validated epoch
     best_epoch: int = 0
     stopped_early: bool = False
+    floor: float = field(init=False)
+
+    def __post_init__(self):
+        self.floor = float(getattr(self.measure, "floor", float("-inf")))
+
+    def record(self, name: str) -> dict:
+        """What a checkpoint's usage says of the budget the evidence chose; the measure's values as
+        ``validation_<name>``."""
+        floor = {"validation_floor": self.floor} if np.isfinite(self.floor) else {}
+        return {"best_epoch": self.best_epoch, "stopped_early": self.stopped_early,
+                f"validation_{name}": self.history, **floor}
 
 
 @dataclass
@@ -162,7 +174,7 @@ def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_step
             validation.history.append({"epoch": epoch + 1, "step": step, "value": value})
             if best is None or value < best[0]:
                 best = (value, epoch + 1, {k: v.detach().cpu().clone() for k, v in model.state_dict().items()})
-            elif epoch + 1 - best[1] >= validation.patience:
+            if value <= validation.floor + 1e-9 or epoch + 1 - best[1] >= validation.patience:
                 validation.stopped_early = True
                 break
     bar.close()

@@ -150,6 +150,5 @@ def train_decision_transformer(frames: Frames, model_cfg: DTConfig, cfg: TrainCo
     if validation is not None:  # the budget the evidence chose
         used_frames = used & ~validation_episodes(frames, cfg.validation)
         usage |= {"dataset_frames": int(used_frames.sum()), "validation_frames": int((used & ~used_frames).sum()),
-                  "best_epoch": validation.best_epoch, "stopped_early": validation.stopped_early,
-                  f"validation_{getattr(measure, 'name', 'loss')}": validation.history}
+                  **validation.record(getattr(measure, "name", "loss"))}
     return model, curve, usage
