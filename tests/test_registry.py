@@ -113,3 +113,19 @@ def test_the_train_stage_declares_every_training_knob_it_reads():
     declared = set(stage["params"])
     read = set(TrainParams.model_fields) - {"envs", "methods"}  # these two expand the stage's matrix instead
     assert "train" in declared or not {f"train.{knob}" for knob in read} - declared
+
+
+@pytest.mark.parametrize("name", ["train_generalisation", "unseen_experiment"])
+def test_the_unseen_layout_transformers_declare_the_train_knobs_they_read_and_not_the_paper_protocols(name):
+    """The unseen-layout DTs read `train`'s training knobs but not the paper protocol's envs, methods and seeds
+    (their seeds are generalisation's): `dvc exp run -S 'train.seeds=[0]'` or a further paper map must not
+    retrain them."""
+    import yaml
+
+    from hnsdt.core.params import TrainParams
+
+    stage = yaml.safe_load((Path(__file__).parents[1] / "dvc.yaml").read_text())["stages"][name]["do"]
+    declared = {p for p in stage["params"] if isinstance(p, str)}
+    protocol = {"train.envs", "train.methods", "train.seeds"}
+    assert not {f"train.{knob}" for knob in TrainParams.model_fields} - protocol - declared
+    assert "train" not in declared and not protocol & declared
