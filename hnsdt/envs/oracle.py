@@ -98,7 +98,6 @@ class MDP:
         steps = w_steps[s] / w_succ[s] if w_succ[s] > 0 else float("nan")
         return Optimum(success=float(v_succ[s]), ret=float(v_ret[s]), steps=float(steps))
 
-
     def fewest_steps(self, states: np.ndarray, horizon: int) -> np.ndarray:
         """Per state of ``states``: the fewest steps to success with no failures (``horizon`` where success takes
         longer or is impossible), the least episode length any policy can have from it at fail_prob 0."""
