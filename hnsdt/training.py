@@ -10,6 +10,7 @@ curves.
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, replace
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Callable
 
@@ -63,7 +64,7 @@ class StepsToExit:
     courses: tuple[Course, ...]
     name: str = "steps"
 
-    @property
+    @cached_property  # (a seed resumed epoch by epoch builds its Validation, which reads it, once per part)
     def floor(self) -> float:
         from hnsdt.envs.oracle import mdp_for
 

@@ -45,19 +45,28 @@ class MDP:
         env.reset(options={"states": np.repeat(self.states, N_ACTIONS, axis=0)})
         nxt, *_ = env.step(np.tile(np.arange(N_ACTIONS), n))
         codes = self._codes(self.states)
-        order = np.argsort(codes)
-        self.succ = order[np.searchsorted(codes[order], self._codes(nxt))].reshape(n, N_ACTIONS)
+        self._order = np.argsort(codes)
+        self._sorted_codes = codes[self._order]
+        self.succ = self.index(nxt).reshape(n, N_ACTIONS)
         items = self.states[:, layout.item_flags]
         at_goal = (self.states[:, 0] == layout.goal[0]) & (self.states[:, 1] == layout.goal[1])
         self.done = at_goal & items.all(axis=1)
         self.is_move = np.arange(N_ACTIONS) < PICK
-        self.start = int(np.flatnonzero(codes == self._codes(np.array([[*layout.start, *[0] * n_flags]])))[0])
+        self.start = int(self.index(np.array([[*layout.start, *[0] * n_flags]]))[0])
 
     def _codes(self, states: np.ndarray) -> np.ndarray:
         """A unique integer per state (row, col, flags) for fast lookup."""
         h, w = self.layout.shape
         flag_code = (states[:, 2:] << np.arange(states.shape[1] - 2)).sum(axis=1) if states.shape[1] > 2 else 0
         return (flag_code * h + states[:, 0]) * w + states[:, 1]
+
+    def index(self, states: np.ndarray) -> np.ndarray:
+        """Each of ``states``' row in :attr:`states`; a state the layout does not have is an error."""
+        codes = self._codes(np.asarray(states, dtype=np.int64))
+        at = np.minimum(np.searchsorted(self._sorted_codes, codes), len(self._sorted_codes) - 1)
+        if not np.array_equal(self._sorted_codes[at], codes):
+            raise ValueError("a state that is not one of the layout's (a wall cell, or flags it has not)")
+        return self._order[at]
 
     def __len__(self) -> int:
         return len(self.states)
@@ -107,12 +116,7 @@ class MDP:
             if np.array_equal(new, dist):
                 break
             dist = new
-        own, codes = self._codes(self.states), self._codes(np.asarray(states, dtype=np.int64))
-        order = np.argsort(own)
-        at = order[np.minimum(np.searchsorted(own[order], codes), len(own) - 1)]
-        if not np.array_equal(own[at], codes):
-            raise ValueError("fewest_steps: a state that is not one of the layout's (a wall cell, or flags it has not)")
-        return dist[at]
+        return dist[self.index(states)]
 
 
 @lru_cache(maxsize=16)
