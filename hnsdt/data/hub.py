@@ -7,11 +7,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from hnsdt.data.card import template_values, render_card
-from hnsdt.data.lerobot_io import DatasetError, check_dataset, open_dataset
+
+# (hnsdt.data.lerobot_io, which imports lerobot and torch — seconds —, is imported where a dataset is read: a push
+# that cannot reach the Hub fails at once)
 
 
 def push_plan(root: str | Path, repo_id: str) -> tuple[list[str], str]:
     """What ``hnsdt dataset push`` would upload: the files (as ``push_to_hub`` selects them) and the card."""
+    from hnsdt.data.lerobot_io import open_dataset
+
     root = Path(root)
     meta = _card_meta(root)
     files = sorted(p.relative_to(root).as_posix() for p in root.rglob("*")
@@ -22,6 +26,8 @@ def push_plan(root: str | Path, repo_id: str) -> tuple[list[str], str]:
 
 def _card_meta(root: Path) -> dict:
     """The dataset's ``meta/hnsdt.json`` after the usual checks, with the card's arguments in it."""
+    from hnsdt.data.lerobot_io import DatasetError, check_dataset
+
     meta = check_dataset(root)
     if "card" not in meta:
         raise DatasetError(f"dataset {root}: no card arguments in meta/hnsdt.json (written before cards were "
@@ -34,9 +40,11 @@ def push_dataset(root: str | Path, repo_id: str, private: bool = False) -> None:
     any failure to reach or write to the Hub is one RuntimeError naming it."""
     import os
 
-    meta = _card_meta(Path(root))
     if os.environ.get("HF_HUB_OFFLINE", "0").lower() in ("1", "true", "yes", "on"):
         raise RuntimeError("cannot push to the Hugging Face Hub: HF_HUB_OFFLINE is set")
+    from hnsdt.data.lerobot_io import open_dataset
+
+    meta = _card_meta(Path(root))
     card = meta["card"]
     ds = open_dataset(root, repo_id=repo_id)
     try:
