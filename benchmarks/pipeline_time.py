@@ -1,10 +1,11 @@
 """How long the whole default pipeline takes, stage by stage: `dvc repro` in a fresh temporary copy of this repo
 (no datasets, models or lock file; this venv), timing each stage from DVC's own "Running stage" lines.
 
-Usage: python benchmarks/pipeline_time.py [--tiny] [--keep] [--cache DIR]
---tiny uses the end-to-end test's tiny params instead of params.yaml; --cache points the copy's DVC cache at
-DIR (e.g. this repo's .dvc/cache, so a later `dvc repro` here restores the timed run's outputs from DVC's
-run cache instead of computing them again). Prints the total and a table of stages,
+Usage: python benchmarks/pipeline_time.py [--tiny] [--keep] [--cache DIR] [--imports]
+--tiny uses the end-to-end test's tiny params instead of params.yaml; --imports also prints how long each stage's
+processes spent importing (Python's -X importtime, which itself slows the imports a little); --cache points the
+copy's DVC cache at DIR (e.g. this repo's .dvc/cache, so a later `dvc repro` here restores the timed run's outputs
+from DVC's run cache instead of computing them again). Prints the total and a table of stages,
 grouped by kind (collect, train, train_offline, train_online, evaluate, report), slowest first.
 """
 
@@ -31,9 +32,12 @@ def main() -> int:
     parser.add_argument("--tiny", action="store_true", help="the end-to-end test's tiny params")
     parser.add_argument("--keep", action="store_true", help="keep the temporary copy")
     parser.add_argument("--cache", type=Path, help="DVC cache folder for the copy (default: its own)")
+    parser.add_argument("--imports", action="store_true", help="each stage's import time (PYTHONPROFILEIMPORTTIME)")
     args = parser.parse_args()
     repo = make_tiny_repo(Path(tempfile.mkdtemp(prefix="hnsdt-pipeline-time-")) / "repo", tiny=args.tiny)
     env = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")
+    if args.imports:
+        env["PYTHONPROFILEIMPORTTIME"] = "1"  # every stage process lists its imports on stderr, which DVC relays
     if args.cache:
         subprocess.run(["dvc", "cache", "dir", str(args.cache.resolve())], cwd=repo, env=env, check=True)
     start = time.perf_counter()
@@ -41,11 +45,16 @@ def main() -> int:
     proc = subprocess.Popen(["dvc", "repro"], cwd=repo, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True, bufsize=1)
     tail: list[str] = []
+    imports: dict[str, float] = defaultdict(float)  # stage -> seconds of its processes' top-level imports
     for line in proc.stdout:
         m = re.match(r"Running stage '([^']+)'", line)
         if m:
             marks.append((time.perf_counter() - start, m.group(1)))
             print(f"[{marks[-1][0]:7.1f} s] {m.group(1)}", flush=True)
+        top = re.match(r"import time:\s+\d+ \|\s+(\d+) \| (\S+)", line)  # (one space: imported by the script)
+        if top and marks:
+            imports[marks[-1][1]] += int(top.group(1)) / 1e6
+            continue
         tail = (tail + [line])[-20:]
     total = time.perf_counter() - start
     if proc.wait() != 0:
@@ -63,6 +72,11 @@ def main() -> int:
     print("\nslowest instances:")
     for name, secs in sorted(per_stage, key=lambda x: -x[1])[:12]:
         print(f"  {secs:7.1f} s  {name}")
+    if args.imports:
+        print(f"\nimports: {sum(imports.values()):.1f} s of the {total:.0f} s, per stage (its processes' imports, "
+              "seconds of the stage):")
+        for name, secs in per_stage:
+            print(f"  {imports[name]:6.1f} of {secs:6.1f} s  {name}")
     if args.keep:
         print(f"\nkept {repo}")
     else:
