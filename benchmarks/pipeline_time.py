@@ -51,9 +51,10 @@ def main() -> int:
         if m:
             marks.append((time.perf_counter() - start, m.group(1)))
             print(f"[{marks[-1][0]:7.1f} s] {m.group(1)}", flush=True)
-        top = re.match(r"import time:\s+\d+ \|\s+(\d+) \| (\S+)", line)  # (one space: imported by the script)
-        if top and marks:
-            imports[marks[-1][1]] += int(top.group(1)) / 1e6
+        if line.startswith("import time:"):  # (--imports; kept out of the failure tail)
+            top = re.match(r"import time:\s+\d+ \|\s+(\d+) \| \S", line)  # one space: imported by the script
+            if top and marks:
+                imports[marks[-1][1]] += int(top.group(1)) / 1e6
             continue
         tail = (tail + [line])[-20:]
     total = time.perf_counter() - start
