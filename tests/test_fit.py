@@ -251,9 +251,10 @@ def test_validation_episodes_are_a_share_of_each_behaviour_never_trained_on(fram
             assert train.sizes.sum() == (~held).sum() and val.sizes.sum() == held.sum()
 
 
-def test_our_adam_steps_torchs_bytes():
-    """hnsdt.models.optim.Adam (torch's, less its compiler hooks) is torch's update to the bit, state-dict round
-    trip included (that it imports no torch._dynamo: test_kernels' child process, which starts without it)."""
+def test_our_adam_steps_torchs_update():
+    """hnsdt.models.optim.Adam is torch's update with a correctly rounded square root (torch's is MKL's, whose
+    roots differ in the last bit by MKL's mode), state-dict round trip included, and refuses the options it does
+    not step (that it imports no torch._dynamo: test_kernels' child process, which starts without it)."""
     from hnsdt.models.optim import Adam
 
     def train(cls):
@@ -270,4 +271,10 @@ def test_our_adam_steps_torchs_bytes():
                 opt.load_state_dict(state)
         return torch.cat([p.detach().flatten() for p in net.parameters()])
 
-    assert torch.equal(train(Adam), train(torch.optim.Adam))
+    ours, torchs = train(Adam), train(torch.optim.Adam)
+    torch.testing.assert_close(ours, torchs, rtol=1e-5, atol=1e-6)
+    assert not torch.equal(ours, train(lambda params, lr: Adam(params, lr=lr, eps=1e-3)))  # (the test can fail)
+    net = torch.nn.Linear(2, 1)
+    net(torch.ones(1, 2)).sum().backward()
+    with pytest.raises(ValueError, match="amsgrad"):
+        Adam(net.parameters(), amsgrad=True).step()

@@ -4,11 +4,12 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
 
-from hnsdt.models.kernels import attention, blas_core, gelu, linear, matmul
+from hnsdt.models.kernels import attention, blas_core, gelu, linear, matmul, sqrt, tanh
 
 
 @pytest.mark.parametrize("shape", [(7, 16), (3, 5, 16), (1, 16), (2, 0, 16)])
@@ -98,6 +99,15 @@ def test_matmul_attention_and_gelu_are_torchs_forward_and_backward():
         assert not matmul(q, k.transpose(-1, -2)).requires_grad
 
 
+def test_tanh_is_torchs_and_sqrt_is_correctly_rounded():
+    torch.manual_seed(0)
+    x = torch.randn(64, 33) * 4
+    torch.testing.assert_close(tanh(x), torch.tanh(x), rtol=0, atol=3e-7)
+    a = x.abs() + 1e-3
+    exact = torch.from_numpy(np.sqrt(a.numpy().astype(np.float64)).astype(np.float32))  # the float64 root, rounded
+    assert torch.equal(sqrt(a), exact) and sqrt(a[:, ::2]).shape == (64, 17)
+
+
 def test_matmul_gradients_are_exact_derivatives():
     torch.manual_seed(0)
     a, b = (torch.randn(*s, dtype=torch.float64, requires_grad=True) for s in ((3, 4, 6), (3, 6, 2)))
@@ -108,10 +118,11 @@ TRAIN_A_FEW_STEPS = """
 import hashlib, sys, numpy as np, torch
 import hnsdt
 from hnsdt.baselines.dqn import DQNConfig, train_dqn
+from hnsdt.baselines.options import OptionsConfig, train_options
 from hnsdt.envs import load_layout
 from hnsdt.models.dt import DecisionTransformer, DTConfig
 from hnsdt.models.optim import Adam
-from hnsdt.models.qnetwork import QNetworkConfig
+from hnsdt.models.qnetwork import OptionCriticConfig, QNetworkConfig
 torch.manual_seed(0)
 g = np.random.default_rng(0)
 dt = DecisionTransformer(DTConfig("subgoal", 1, 5, 5, context=4, n_layers=2, d_model=32, n_heads=2,
@@ -132,8 +143,10 @@ for _ in range(3):
 lay = load_layout("keydoor_5x5")
 q, _, _ = train_dqn(lay, 50, QNetworkConfig(lay.n_flags, *lay.shape),
                     DQNConfig(env_steps=400, learning_starts=200, batch_size=16, seed=0), progress=False)
+oc, _, _ = train_options(lay, 50, OptionCriticConfig(lay.n_flags, *lay.shape),
+                         OptionsConfig(env_steps=400, learning_starts=200, batch_size=16, seed=0), progress=False)
 h = hashlib.sha256()
-for model in (dt, q):
+for model in (dt, q, oc):
     for t in model.state_dict().values():
         h.update(t.numpy().tobytes())
 print("torch._dynamo" in sys.modules, h.hexdigest())
@@ -141,8 +154,9 @@ print("torch._dynamo" in sys.modules, h.hexdigest())
 
 
 def test_the_networks_bytes_do_not_follow_what_mkl_or_onednn_are_told():
-    # MKL's COMPATIBLE mode still trained other weights on an AMD EPYC than on an Intel Xeon, and GELU ran on
-    # oneDNN's ISA-dependent code: neither may reach a transformer's or a Q-network's bytes any more. (The DQN's
+    # MKL's COMPATIBLE mode still trained other weights on an AMD EPYC than on an Intel Xeon, GELU ran on oneDNN's
+    # ISA-dependent code, and erf, exp and sqrt on MKL's vector maths (VML; only an Intel Xeon showed it): none may
+    # reach a transformer's or a Q-network's bytes any more. (The DQN's
     # and the transformer's training imports no torch._dynamo: hnsdt.models.optim.Adam, 1.2 s per process.)
     digests = set()
     for mkl, onednn in [("COMPATIBLE", "AVX2"), ("AUTO", "AVX512_CORE_AMX")]:

@@ -96,7 +96,7 @@ def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: Option
             advantage = g - q[seed_rows, copy_rows, opt_t]
             margin = q_next_online[seed_rows, copy_rows, opt_t] - q_next_online.max(-1).values + c.termination_reg
         log_pi = F.log_softmax(pi_logits, -1)
-        entropy = -(log_pi.exp() * log_pi).sum(-1)
+        entropy = -(torch.softmax(pi_logits, -1) * log_pi).sum(-1)  # (not log_pi.exp(): MKL's exp)
         chosen = log_pi.gather(-1, torch.from_numpy(actions).to(device)[..., None]).squeeze(-1)
         policy_loss = -(chosen * advantage) - c.entropy_reg * entropy
         termination_loss = b * margin * torch.from_numpy((~done).astype(np.float32)).to(device)

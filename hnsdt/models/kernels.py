@@ -1,5 +1,4 @@
-"""The learned networks' matrix products, and the one activation oneDNN computed, on kernels pinned by name, not by
-vendor.
+"""The learned networks' matrix products and elementwise functions on kernels pinned by name, not by vendor.
 
 Why: a model's bytes depend on the kernels that computed it. torch's CPU GEMMs are MKL's, which dispatches by
 vendor and ISA, so the pipeline pins them to ``MKL_CBWR=COMPATIBLE`` (:mod:`hnsdt.core.reproducible`): SSE2
@@ -8,12 +7,14 @@ against 55–63 for MKL's native kernels — and even so an AMD EPYC and an Inte
 same seeds (docs/reproducibility.md). NumPy's OpenBLAS picks its kernels by core type, and
 ``OPENBLAS_CORETYPE=Haswell`` (pinned beside MKL's setting) runs the same AVX2/FMA kernels with the same blocking on
 any x86-64 CPU that has AVX2, Intel or AMD: 21–28 GMAC/s on that product, about 2× the pinned MKL
-(``benchmarks/cpu_determinism.py``). torch's GELU runs on oneDNN's JIT code, chosen by ISA.
+(``benchmarks/cpu_determinism.py``). torch's GELU runs on oneDNN's JIT code, chosen by ISA, and its elementwise
+``erf``, ``exp``, ``log``, ``tanh`` and ``sqrt`` on MKL's vector maths (VML), whose bytes follow MKL's mode and the
+CPU's vendor (measured on an Intel Xeon, where an AMD EPYC had shown no difference).
 
 :func:`linear` (and :class:`Linear`, an ``nn.Linear`` computed by it), :func:`matmul` and :func:`attention` are
 torch's products computed there, forward and backward (autograd functions), for CPU tensors; :func:`gelu` is the
-exact GELU from torch's own ``erf``. Other devices keep torch's kernels. Same numbers up to rounding (tested); the
-bytes are OpenBLAS's and torch's vectorised kernels' (``ATEN_CPU_CAPABILITY``), none MKL's or oneDNN's: a model
+exact GELU on torch's own kernel, :func:`tanh` and :func:`sqrt` torch's functions off VML. Other devices keep
+torch's kernels. Same numbers up to rounding (tested); the bytes are OpenBLAS's and torch's vectorised kernels' (``ATEN_CPU_CAPABILITY``), none MKL's or oneDNN's: a model
 built from these parts trains the same bytes whatever MKL or oneDNN is asked to do (tested).
 """
 
@@ -152,7 +153,53 @@ def attention(q, k, v, mask: torch.Tensor, dropout_p: float = 0.0) -> torch.Tens
     return matmul(F.dropout(weights, dropout_p) if dropout_p > 0 else weights, v)
 
 
+class _without_onednn:
+    """torch's own CPU kernels for the ops inside (``F.gelu`` and its backward otherwise run oneDNN's JIT code, whose
+    bytes follow the ISA oneDNN picks). The flag is the process's: set and restored around one op."""
+
+    def __enter__(self):
+        self.was = torch._C._get_mkldnn_enabled()
+        torch._C._set_mkldnn_enabled(False)
+
+    def __exit__(self, *exc):
+        torch._C._set_mkldnn_enabled(self.was)
+
+
+class _GELU(torch.autograd.Function):
+    @staticmethod
+    def forward(ctx, x):
+        ctx.save_for_backward(x)
+        with _without_onednn():
+            return F.gelu(x)
+
+    @staticmethod
+    def backward(ctx, grad):
+        (x,) = ctx.saved_tensors
+        with _without_onednn():
+            return torch.ops.aten.gelu_backward(grad.contiguous(), x)
+
+
 def gelu(x: torch.Tensor) -> torch.Tensor:
-    """``F.gelu(x)`` (the exact, erf form) from torch's own ``erf``: ``F.gelu`` itself runs oneDNN's JIT kernel,
-    whose bytes follow the ISA oneDNN picks."""
-    return x * 0.5 * (1.0 + torch.erf(x * 0.7071067811865476))
+    """``F.gelu(x)`` (the exact, erf form), forward and backward on torch's own vectorised kernel for CPU tensors:
+    ``F.gelu`` runs oneDNN's JIT code (bytes by ISA), and ``torch.erf`` MKL's vector maths (bytes by MKL's mode
+    and the CPU's vendor: ``MKL_CBWR`` changed them on an Intel Xeon)."""
+    if x.device.type != "cpu":
+        return F.gelu(x)
+    return _GELU.apply(x)
+
+
+def tanh(x: torch.Tensor) -> torch.Tensor:
+    """``torch.tanh(x)`` up to rounding, as ``2 σ(2x) − 1``: torch's CPU ``tanh`` (like ``exp``, ``log``, ``erf`` and
+    ``sqrt``) runs MKL's vector maths, whose bytes follow MKL's mode and the CPU; ``sigmoid`` is torch's own."""
+    if x.device.type != "cpu":
+        return torch.tanh(x)
+    return 2 * torch.sigmoid(2 * x) - 1
+
+
+def sqrt(x: torch.Tensor) -> torch.Tensor:
+    """``torch.sqrt(x)``, correctly rounded (NumPy's, the IEEE square root every x86-64 CPU computes alike) for CPU
+    tensors: torch's runs MKL's vector maths, which rounded 0.6 % of float32 roots otherwise on an Intel Xeon, 17 %
+    under ``MKL_CBWR=COMPATIBLE``."""
+    if x.device.type != "cpu":
+        return torch.sqrt(x)
+    return torch.from_numpy(np.sqrt(_array(x))).reshape(x.shape)

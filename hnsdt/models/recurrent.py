@@ -18,7 +18,7 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from hnsdt.models.dt import N_ACTIONS
-from hnsdt.models.kernels import linear
+from hnsdt.models.kernels import linear, tanh
 from hnsdt.models.network import Network
 from hnsdt.symbolic.subgoals import VOCAB_SIZE
 
@@ -122,7 +122,7 @@ def _dense(head: nn.Module, x: torch.Tensor) -> torch.Tensor:
 def recurrent_step(rnn: nn.LSTM | nn.GRU, x: torch.Tensor, hidden=None):
     """One time step of ``rnn`` (eval mode, ``batch_first``) on inputs x (N, d): ``(out (N, h), hidden)``, hidden as
     torch's (``(h, c)`` of (layers, N, h) each for an LSTM, (layers, N, h) for a GRU; None = zeros). The gate
-    equations of torch's documentation, each product on :func:`kernels.linear`."""
+    equations of torch's documentation, each product on :func:`kernels.linear`, tanh on :func:`kernels.tanh`."""
     n, lstm = len(x), isinstance(rnn, nn.LSTM)
     zeros = torch.zeros(rnn.num_layers, n, rnn.hidden_size, dtype=x.dtype, device=x.device)
     if hidden is None:
@@ -135,13 +135,13 @@ def recurrent_step(rnn: nn.LSTM | nn.GRU, x: torch.Tensor, hidden=None):
         gi, gh = linear(x, w_ih, b_ih), linear(h, w_hh, b_hh)
         if lstm:
             i, f, g, o = (gi + gh).chunk(4, dim=1)
-            c = torch.sigmoid(f) * hidden[1][k] + torch.sigmoid(i) * torch.tanh(g)
-            x = torch.sigmoid(o) * torch.tanh(c)
+            c = torch.sigmoid(f) * hidden[1][k] + torch.sigmoid(i) * tanh(g)
+            x = torch.sigmoid(o) * tanh(c)
             cs.append(c)
         else:
             i_r, i_z, i_n = gi.chunk(3, dim=1)
             h_r, h_z, h_n = gh.chunk(3, dim=1)
             r, z = torch.sigmoid(i_r + h_r), torch.sigmoid(i_z + h_z)
-            x = (1 - z) * torch.tanh(i_n + r * h_n) + z * h
+            x = (1 - z) * tanh(i_n + r * h_n) + z * h
         hs.append(x)  # (no dropout between layers: eval mode)
     return x, ((torch.stack(hs), torch.stack(cs)) if lstm else torch.stack(hs))
