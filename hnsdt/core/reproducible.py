@@ -1,6 +1,7 @@
 """Same seed, same bytes — on one machine, and across x86-64 machines as far as measured (docs/reproducibility.md:
-an AMD EPYC and a machine without AVX-512 gave the same bytes; an Intel Xeon gave other ones while MKL and oneDNN
-still computed parts of the networks, which since 907d602 only the LSTM and GRU baselines' recurrent layers do).
+two AMD EPYCs, with and without AVX-512, gave the same bytes; an Intel Xeon gave other ones while MKL and oneDNN
+still computed parts of the networks — products until 907d602, elementwise maths until 01ac17a —, which now only
+the LSTM and GRU baselines' training does).
 
 Seeding fixes the random streams; the numerics still depend on which kernels the CPU runs. Measured with
 ``benchmarks/cpu_determinism.py`` (a DT and an option-critic trained for a few steps, weights hashed), each of
@@ -8,8 +9,8 @@ these alone changes the trained bytes, so each is pinned for every process of th
 
 * ``ATEN_CPU_CAPABILITY=avx2`` — torch's own vectorised kernels (layer norm, softmax, reductions) otherwise
   pick AVX-512 where the CPU has it and AVX2 where it does not;
-* ``MKL_CBWR=COMPATIBLE`` — MKL's conditional numerical reproducibility. MKL dispatches its GEMMs by vendor
-  and ISA; per Intel's documentation only ``COMPATIBLE`` (SSE2 without approximate reciprocals) gives the
+* ``MKL_CBWR=COMPATIBLE`` — MKL's conditional numerical reproducibility. MKL dispatches its GEMMs and vector
+  maths (torch's CPU ``erf``, ``exp``, ``tanh``, ``sqrt``) by vendor and ISA; per Intel's documentation only ``COMPATIBLE`` (SSE2 without approximate reciprocals) gives the
   same results on Intel and AMD processors alike (``AVX2`` is silently ignored on AMD) — measured not
   to hold, so only the LSTM and GRU still compute there;
 * ``DNNL_MAX_CPU_ISA=AVX2`` — oneDNN's JIT kernels (torch's GELU until 907d602; convolutions) likewise;
