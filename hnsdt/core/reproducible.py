@@ -10,14 +10,14 @@ these alone changes the trained bytes, so each is pinned for every process of th
 * ``ATEN_CPU_CAPABILITY=avx2`` — torch's own vectorised kernels (layer norm, softmax, reductions) otherwise
   pick AVX-512 where the CPU has it and AVX2 where it does not;
 * ``MKL_CBWR=COMPATIBLE`` — MKL's conditional numerical reproducibility. MKL dispatches its GEMMs and vector
-  maths (torch's CPU ``erf``, ``exp``, ``tanh``, ``sqrt``) by vendor and ISA; per Intel's documentation only ``COMPATIBLE`` (SSE2 without approximate reciprocals) gives the
-  same results on Intel and AMD processors alike (``AVX2`` is silently ignored on AMD) — measured not
-  to hold, so only the LSTM and GRU still compute there;
+  maths (torch's CPU ``erf``, ``exp``, ``tanh``, ``sqrt``) by vendor and ISA; per Intel's documentation only
+  ``COMPATIBLE`` (SSE2 without approximate reciprocals) gives the same results on Intel and AMD processors alike
+  (``AVX2`` is silently ignored on AMD) — measured not to hold, so only the LSTM and GRU still compute there;
 * ``DNNL_MAX_CPU_ISA=AVX2`` — oneDNN's JIT kernels (torch's GELU until 907d602; convolutions) likewise;
 * ``OPENBLAS_CORETYPE=Haswell`` — NumPy's OpenBLAS, which computes the decision transformers' and Q-networks'
-  products (:mod:`hnsdt.models.kernels`: about 2× MKL's ``COMPATIBLE`` code's throughput), picks its kernels by core type,
-  not vendor: pinned to its AVX2/FMA kernels, which every machine of this project has (on one thread, always:
-  :data:`ALWAYS`);
+  products (:mod:`hnsdt.models.kernels`: about 2× MKL's ``COMPATIBLE`` code's throughput), picks its kernels by
+  core type, not vendor: pinned to its AVX2/FMA kernels, which every machine of this project has (on one thread,
+  always: :data:`ALWAYS`);
 * ``OMP_NUM_THREADS=2`` — parallel reductions split work by thread count: the machines of this project have 2
   cores, so 2 threads is also torch's default here;
 * ``PYTHONHASHSEED=0`` — lerobot orders task lists through Python sets, whose order follows the string hash.

@@ -14,8 +14,9 @@ CPU's vendor (measured on an Intel Xeon, where an AMD EPYC had shown no differen
 :func:`linear` (and :class:`Linear`, an ``nn.Linear`` computed by it), :func:`matmul` and :func:`attention` are
 torch's products computed there, forward and backward (autograd functions), for CPU tensors; :func:`gelu` is the
 exact GELU on torch's own kernel, :func:`tanh` and :func:`sqrt` torch's functions off VML. Other devices keep
-torch's kernels. Same numbers up to rounding (tested); the bytes are OpenBLAS's and torch's vectorised kernels' (``ATEN_CPU_CAPABILITY``), none MKL's or oneDNN's: a model
-built from these parts trains the same bytes whatever MKL or oneDNN is asked to do (tested).
+torch's kernels. Same numbers up to rounding (tested); the bytes are OpenBLAS's and torch's vectorised kernels'
+(``ATEN_CPU_CAPABILITY``), none MKL's or oneDNN's: a model built from these parts trains the same bytes whatever
+MKL or oneDNN is asked to do (tested).
 """
 
 from __future__ import annotations
