@@ -8,7 +8,8 @@ time per step, then the throughput of one (100 x 128) . (128 x 512) product on o
 (MKL) against ``hnsdt.models.kernels.linear`` (NumPy's OpenBLAS), which computes the DT's and the Q-networks'
 products since the MKL and oneDNN rows stopped mattering to them (2026-12-01). A row whose hash differs from the
 first row's shows a setting that a different machine (another ISA, another vendor's MKL path, another BLAS core
-type, another core count) would change; the last rows are what ``hnsdt/core/reproducible.py`` pins.
+type, another core count) would change; the last rows are what ``hnsdt/core/reproducible.py`` pins, and the last
+line says whether they gave the hashes of the machine that made the committed lock (:data:`REFERENCE`).
 """
 
 from __future__ import annotations
@@ -90,8 +91,14 @@ CONFIGS = [
 ]
 
 
+# What the pinned rows printed where the committed lock was made: another CPU that prints other hashes at the same
+# code computes other bytes (docs/reproducibility.md). A change to the networks' numerics changes them too.
+REFERENCE = ("c53af9d0c15a", "918578685691", "Intel Xeon family 6 model 167, AVX-512, at 71bfd73")
+
+
 def main() -> int:
     argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()  # --help, and nothing else
+    pinned: set[tuple[str, str]] = set()
     base = {k: v for k, v in os.environ.items() if k not in PINNED_CPU}
     base.update(ALWAYS)
     print(f"{'configuration':<68} {'ISA':<7} {'th':>2}  {'DT weights':<12} {'DT step':>14}  "
@@ -100,6 +107,12 @@ def main() -> int:
         out = subprocess.run([sys.executable, "-c", CHILD], env={**base, **extra}, capture_output=True, text=True)
         line = out.stdout.strip() or f"failed: {out.stderr.strip().splitlines()[-1:]}"
         print(f"{name:<68} {line}", flush=True)
+        if extra is PINNED_CPU and not out.returncode:
+            pinned.add(tuple(line.split()[i] for i in (2, 5)))
+    ref_dt, ref_oc, where = REFERENCE
+    same = pinned == {(ref_dt, ref_oc)}
+    print(f"\npinned weights {'match' if same else 'DIFFER from'} the reference (DT {ref_dt}, option-critic {ref_oc}: "
+          f"{where}){'' if same else ': this CPU computes other bytes, or the code changed them (then update it)'}")
     return 0
 
 
