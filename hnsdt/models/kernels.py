@@ -156,7 +156,8 @@ def attention(q, k, v, mask: torch.Tensor, dropout_p: float = 0.0) -> torch.Tens
 
 class _without_onednn:
     """torch's own CPU kernels for the ops inside (``F.gelu`` and its backward otherwise run oneDNN's JIT code, whose
-    bytes follow the ISA oneDNN picks). The flag is the process's: set and restored around one op."""
+    bytes follow the ISA oneDNN picks). The flag is the process's: set and restored around one op. (Not
+    ``torch.backends.mkldnn.flags``: it also sets oneDNN's TF32 flag, which warns on every entry on a CPU build.)"""
 
     def __enter__(self):
         self.was = torch._C._get_mkldnn_enabled()
