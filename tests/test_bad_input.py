@@ -34,6 +34,8 @@ def small_params(**edits) -> dict:
     p["train"].update(envs=["keydoor"], methods=["hnsdt"], seeds=[0], epochs=2, max_steps=0)  # 2: split in halves
     p["baselines"].update(offline=[], online=[])
     p["evaluate"].update(methods=["symbolic", "hnsdt"], episodes=2, fail_probs=[0.1])
+    p["compute"]["workers"] = 1  # runs in the test's process: a pool's workers would each import torch (seconds)
+    # for a second of work (the pool's own bytes and errors: tests/test_train_cli.py, tests/test_fit.py)
     for dotted, value in edits.items():
         node = p
         *parents, key = dotted.split(".")

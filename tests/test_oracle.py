@@ -11,6 +11,20 @@ def test_state_counts_match_the_paper_layouts(keydoor, multikeydoor):
     assert len(MDP(keydoor)) == 84 and len(MDP(multikeydoor)) == 4160
 
 
+@pytest.mark.parametrize("fail_prob, gamma", [(0.0, 1.0), (0.3, 1.0), (0.3, 0.9)])
+def test_stopping_once_the_live_states_values_repeat_changes_no_bit(keydoor, multikeydoor, fail_prob, gamma):
+    """solve() stops when the values of the states that can still succeed repeat (every layout has states that
+    cannot, whose return falls forever): the same bits as every step of the horizon, which it runs when no state
+    is known to be live."""
+    from hnsdt.envs.generate import generate
+
+    for layout in (keydoor, multikeydoor, generate("keydoor_maze", 0)):
+        every_step = MDP(layout)
+        assert 0 < every_step.alive.sum() < len(every_step)  # (live and dead states both)
+        every_step.alive = np.zeros_like(every_step.alive)
+        assert MDP(layout).solve(fail_prob, 250, gamma) == every_step.solve(fail_prob, 250, gamma)
+
+
 @pytest.mark.parametrize("p,T", [(0.5, 3), (0.3, 5), (0.0, 2)])
 def test_value_iteration_against_a_hand_computed_corridor(p, T):
     """'@G': move right until it works. Success at step k has probability (1-p) p^(k-1)."""

@@ -53,6 +53,11 @@ class MDP:
         self.done = at_goal & items.all(axis=1)
         self.is_move = np.arange(N_ACTIONS) < PICK
         self.start = int(self.index(np.array([[*layout.start, *[0] * n_flags]]))[0])
+        # The states from which working moves can reach success. The others' values never settle (each step
+        # costs the same forever), and every layout has some (flag combinations no episode makes).
+        self.alive = self.done.copy()
+        while not np.array_equal(grown := self.alive | self.alive[self.succ].any(axis=1), self.alive):
+            self.alive = grown
 
     def _codes(self, states: np.ndarray) -> np.ndarray:
         """A unique integer per state (row, col, flags) for fast lookup."""
@@ -98,8 +103,15 @@ class MDP:
             new_w_steps = new_w_succ + (1 - stay) * np.where(hit, 0.0, w_steps[nxt]) + stay * w_steps
             new = [np.where(self.done, 0.0, x) for x in (q_ret.max(axis=1), q_succ.max(axis=1), new_w_succ,
                                                         new_w_steps)]
-            # A longer horizon changes nothing once every value is stable to rounding: stop early.
-            stable = all(np.abs(a - b).max() < 1e-13 for a, b in zip(new, (v_ret, v_succ, w_succ, w_steps)))
+            # A longer horizon changes nothing once every value is stable to rounding: stop early. Nor once every
+            # value of the states that can still succeed repeats to the bit: theirs depend on each other's and on
+            # the dead states' returns, which only fall (an action into a dead state that is not a state's best
+            # never becomes it; one that is would have moved that state's value). So the remaining steps would
+            # repeat them exactly. The start must be one of them (a dead start's return falls step by step).
+            old = (v_ret, v_succ, w_succ, w_steps)
+            stable = (all(np.abs(a - b).max() < 1e-13 for a, b in zip(new, old))
+                      or (self.alive[self.start] and all(np.array_equal(a[self.alive], b[self.alive])
+                                                         for a, b in zip(new, old))))
             v_ret, v_succ, w_succ, w_steps = new
             if stable:
                 break
