@@ -53,11 +53,10 @@ class MDP:
         self.done = at_goal & items.all(axis=1)
         self.is_move = np.arange(N_ACTIONS) < PICK
         self.start = int(self.index(np.array([[*layout.start, *[0] * n_flags]]))[0])
-        # The states from which working moves can reach success. The others' values never settle (each step
-        # costs the same forever), and every layout has some (flag combinations no episode makes).
-        self.alive = self.done.copy()
-        while not np.array_equal(grown := self.alive | self.alive[self.succ].any(axis=1), self.alive):
-            self.alive = grown
+        # The states from which working moves can reach success (a shortest path visits each state at most once).
+        # The others' values never settle (each step costs the same forever), and every layout has some (flag
+        # combinations no episode makes).
+        self.alive = self._fewest_steps(len(self)) < len(self)
 
     def _codes(self, states: np.ndarray) -> np.ndarray:
         """A unique integer per state (row, col, flags) for fast lookup."""
@@ -122,13 +121,17 @@ class MDP:
     def fewest_steps(self, states: np.ndarray, horizon: int) -> np.ndarray:
         """Per state of ``states``: the fewest steps to success with no failures (``horizon`` where success takes
         longer or is impossible), the least episode length any policy can have from it at fail_prob 0."""
+        return self._fewest_steps(horizon)[self.index(states)]
+
+    def _fewest_steps(self, horizon: int) -> np.ndarray:
+        """:meth:`fewest_steps` of every state."""
         dist = np.where(self.done, 0, horizon).astype(np.int64)
         for _ in range(horizon):  # Bellman-Ford on unit steps: stable after the longest shortest path
             new = np.where(self.done, 0, np.minimum(dist, 1 + dist[self.succ].min(axis=1)))
             if np.array_equal(new, dist):
                 break
             dist = new
-        return dist[self.index(states)]
+        return dist
 
 
 @lru_cache(maxsize=16)
