@@ -81,15 +81,13 @@ def pytest_xdist_make_scheduler(config, log):
 
 def pytest_collection_modifyitems(items):
     """The order the workers are handed tests in (pytest_xdist_make_scheduler above; `--no-loadscope-reorder`):
-    the longest first — files with slow (end-to-end) tests, then the learning tests, then the files that copy
+    the longest first — the slow (end-to-end) tests, then the learning tests, then the files that copy
     the tiny pipeline's run (by then the worker running test_pipeline.py has about finished it) — so that the
     short ones fill the gaps at the end."""
-    slow_files = {item.path for item in items if item.get_closest_marker("slow")}
-
     def rank(item) -> int:
         if item.path.name in AFTER_THE_PIPELINE_RUN:
             return 2
-        return 0 if item.path in slow_files else 1 if item.get_closest_marker("learning") else 3
+        return 0 if item.get_closest_marker("slow") else 1 if item.get_closest_marker("learning") else 3
 
     items.sort(key=rank)  # stable
 

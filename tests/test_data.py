@@ -224,6 +224,7 @@ def test_push_lists_what_it_would_upload_and_fails_offline_with_one_line(small_d
     assert sorted(p.relative_to(root).as_posix() for p in root.rglob("*") if p.is_file()) == before
 
 
+@pytest.mark.slow  # (an end-to-end run: tests/conftest.py, pyproject.toml's markers)
 def test_rendered_frames_load_in_stock_lerobot_and_its_visualizer(tmp_path, keydoor):
     """`collect.render`: the grid of every frame as video, which lerobot-dataset-viz turns into a recording."""
     from hnsdt.envs.render import render_rgb

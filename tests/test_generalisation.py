@@ -533,6 +533,7 @@ def test_the_dataset_over_generated_layouts_stores_each_frames_view(tmp_path):
     assert (frames.states[0] == view_states(layouts[int(np.ravel(cols["layout_index"])[0])], first, 2)[0]).all()
 
 
+@pytest.mark.slow  # (an end-to-end run: tests/conftest.py, pyproject.toml's markers)
 def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp_path):
     """The stages' functions at a tiny budget: each method trains on the dataset (or the layout pool) into its
     view network, and the evaluation has one row per method x seed x layout x fail_prob x episode, each with its
@@ -622,6 +623,7 @@ def test_a_methods_budget_replaces_the_protocols_knobs_and_a_bad_one_is_named(tm
         network_configs(validate(params), "dqn", 0)
 
 
+@pytest.mark.slow  # (an end-to-end run: tests/conftest.py, pyproject.toml's markers)
 def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operators(tmp_path):
     """`random_episodes_per_layout` adds random walks to the dataset; the paper's HNSDT trains on them with the
     paper's Move labels and is evaluated under the paper's planner (BFS over Move operators); without random

@@ -153,6 +153,7 @@ print("torch._dynamo" in sys.modules, h.hexdigest())
 """
 
 
+@pytest.mark.slow  # (an end-to-end run: tests/conftest.py, pyproject.toml's markers)
 def test_the_networks_bytes_do_not_follow_what_mkl_or_onednn_are_told():
     # MKL's COMPATIBLE mode still trained other weights on an AMD EPYC than on an Intel Xeon, GELU ran on oneDNN's
     # ISA-dependent code, and erf, exp and sqrt on MKL's vector maths (VML; only an Intel Xeon showed it): none may
