@@ -18,7 +18,7 @@ from hnsdt.models.windows import frames_from_arrays
 from hnsdt.envs import KeyDoorVectorEnv, load_layout
 from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint
 from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig, QNetwork, QNetworkConfig
-from hnsdt.models.recurrent import START_ACTION, RecurrentConfig, RecurrentPolicy
+from hnsdt.models.recurrent import GROUP_COSTS, START_ACTION, RecurrentConfig, RecurrentPolicy, length_groups
 
 from conftest import REPO
 
@@ -249,3 +249,36 @@ def test_acting_steps_compute_what_the_sequence_pass_computes(cell, hierarchical
         with torch.no_grad():
             own, _, _ = model(torch.from_numpy(ep.states[None, :-1]), torch.from_numpy(before[None]))
         assert (own[0].argmax(-1).numpy() == ep.actions).all()
+
+
+def test_an_lstms_batch_in_length_groups_is_the_one_padded_pass():
+    """RecurrentPolicy.loss computes an LSTM's batch of episodes of very different lengths in groups of like
+    length (length_groups), each cut to its longest: the loss and every gradient are the one padded pass's up to
+    rounding. A batch of like lengths is one group, and a GRU's batch is always that one pass."""
+    assert len(length_groups(np.full(16, 30), *GROUP_COSTS["lstm"])) == 1
+    lengths = np.array([3, 40, 5, 38, 2, 4, 41, 6, 3, 2, 5, 4])
+    groups = length_groups(lengths, *GROUP_COSTS["lstm"])
+    assert len(groups) > 1 and sorted(np.concatenate(groups).tolist()) == list(range(len(lengths)))
+    assert all((np.diff(lengths[g]) <= 0).all() for g in groups)  # each group longest first, ...
+    assert all(lengths[a].min() >= lengths[b].max() for a, b in zip(groups, groups[1:]))  # ... the groups too
+    g = torch.Generator().manual_seed(0)
+    B, T = len(lengths), int(lengths.max())
+    mask = torch.arange(T)[None] < torch.from_numpy(lengths)[:, None]
+    batch = {"states": torch.stack([torch.randint(0, 5, (B, T), generator=g), torch.randint(0, 5, (B, T), generator=g),
+                                    torch.randint(0, 2, (B, T), generator=g), torch.randint(0, 2, (B, T), generator=g)],
+                                   -1),
+             "prev_actions": torch.randint(0, 6, (B, T), generator=g), "actions": torch.randint(0, 5, (B, T), generator=g),
+             "subgoals": torch.randint(0, 20, (B, T), generator=g), "mask": mask}
+    for cell, hierarchical in (("lstm", True), ("gru", False)):
+        torch.manual_seed(0)
+        model = RecurrentPolicy(RecurrentConfig(cell, n_flags=2, grid_h=5, grid_w=5, n_layers=2, hidden=32,
+                                                hierarchical=hierarchical))
+        params = list(model.parameters())
+        grouped = model.loss(batch)
+        padded = model._nll_sum(batch) / mask.float().sum()  # (the loss as one padded pass computes it)
+        if cell == "gru":
+            assert torch.equal(grouped, padded)
+            continue
+        assert torch.allclose(grouped, padded, rtol=0, atol=1e-6)
+        for a, b in zip(torch.autograd.grad(grouped, params), torch.autograd.grad(padded, params)):
+            assert torch.allclose(a, b, rtol=0, atol=1e-6)
