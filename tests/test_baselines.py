@@ -205,6 +205,30 @@ def test_options_agent_is_reproducible_with_its_seed(keydoor):
     assert all(np.array_equal(x.actions, y.actions) for x, y in zip(*runs))
 
 
+@pytest.mark.parametrize("network, config", [(QNetwork, QNetworkConfig), (OptionCritic, OptionCriticConfig)])
+def test_online_agents_compute_each_distinct_state_once_to_the_same_bytes(keydoor, network, config):
+    """An online learner's agent computes its network on the distinct states of the batch only (copies in one
+    state share a row): every copy's outputs are the network's on the whole batch up to rounding (a row's last
+    bits follow the batch's size: OpenBLAS picks its kernels by shape), copies in one state get one row's bytes,
+    and the greedy actions are the same."""
+    torch.manual_seed(0)
+    model = network(config(keydoor.n_flags, *keydoor.shape, hidden=64)).eval()
+    env = KeyDoorVectorEnv(40, keydoor, 0.3, 30)
+    obs, _ = env.reset(seed=4)
+    obs[10:17, 0] = np.arange(7) % keydoor.shape[0]  # (some other states: every copy starts in one)
+    obs = np.concatenate([obs, obs[10:17], obs[3:5]])  # (copies in one state, as copies that fail alike are)
+    agent = DQNAgent(model, 0.0, 0, keydoor)
+    states = torch.from_numpy(np.asarray(model.model_states(keydoor, obs), np.int64))
+    with torch.no_grad():
+        whole = model(states)
+    shared = agent.outputs(obs)
+    whole, shared = (whole, shared) if isinstance(whole, tuple) else ((whole,), (shared,))
+    for a, b in zip(whole, shared):
+        assert torch.allclose(a, b, rtol=0, atol=1e-5)
+        assert torch.equal(b[40:47], b[10:17]) and torch.equal(b[47:], b[3:5])
+    assert torch.equal(whole[0].argmax(-1), shared[0].argmax(-1))
+
+
 @pytest.mark.parametrize("edit, message", [
     (lambda p: p["baselines"]["dqn"].update(learning_rate=0.1), "baselines.dqn: unknown keys ['learning_rate']"),
     (lambda p: p["baselines"]["dqn"].update(env_steps={"keydoor": 10}), "baselines.dqn.env_steps"),

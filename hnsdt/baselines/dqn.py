@@ -78,8 +78,7 @@ class DQNAgent(OnlineAgent):
     """Greedy in Q (or ε-greedy with ``epsilon`` > 0, from the seeded generator)."""
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
-            actions = self.model(self.states(obs)).argmax(-1).cpu().numpy()
+        actions = self.outputs(obs).argmax(-1).cpu().numpy()
         if self.epsilon > 0:
             explore = self.rng.random(len(obs)) < self.epsilon
             actions = np.where(explore, self.rng.integers(0, N_ACTIONS, len(obs)), actions)

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 import torch.nn as nn
 
+from hnsdt.agents.rollout import distinct_rows
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv, Streams
 from hnsdt.models.kernels import Linear
@@ -282,8 +283,17 @@ class OnlineAgent:
         self.rng = seed if isinstance(seed, Streams) else np.random.default_rng(seed)
         self.device = next(model.parameters()).device
 
-    def states(self, obs: np.ndarray) -> torch.Tensor:
-        return torch.from_numpy(np.asarray(self.model.model_states(self.layout, obs), np.int64)).to(self.device)
+    def outputs(self, obs: np.ndarray):
+        """The model's outputs for every copy, each distinct state computed once: the policy reads the current
+        state alone, and copies that fail or loop alike share states. The whole batch's outputs up to rounding (a
+        row's last bits follow the batch's size: OpenBLAS picks its kernels by shape; tested), as the transformers'
+        and RNNs' distinct histories are: the same bytes run to run, other last bits than one row per copy."""
+        states = np.asarray(self.model.model_states(self.layout, obs), np.int64)
+        first, inverse = distinct_rows(states)
+        with torch.no_grad():
+            out = self.model(torch.from_numpy(states[first]).to(self.device))
+        index = torch.from_numpy(inverse).to(self.device)
+        return out[index] if isinstance(out, torch.Tensor) else tuple(part[index] for part in out)
 
     def reset(self, obs: np.ndarray) -> None:
         pass

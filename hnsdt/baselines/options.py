@@ -143,8 +143,7 @@ class OptionsAgent(OnlineAgent):
         self.need_option = np.ones(len(obs), bool)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
-            q, beta, logits = self.model(self.states(obs))
+        q, beta, logits = self.outputs(obs)
         rows = torch.arange(len(obs))
         # an option that has run one step ends with probability β_ω(s) in the state it reached
         ended = self.rng.random(len(obs)) < beta[rows, torch.from_numpy(self.option)].cpu().numpy()
