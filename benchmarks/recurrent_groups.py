@@ -14,7 +14,6 @@ milliseconds per batch of both (the fastest round) and the largest difference of
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 
 from hnsdt.core.reproducible import pin_process
@@ -23,6 +22,7 @@ pin_process()
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
+from packed_episodes import gradient_ms  # noqa: E402  (benchmarks/, beside this script)
 
 
 def padded_loss(model, batch: dict) -> torch.Tensor:
@@ -71,13 +71,8 @@ def main() -> None:
                 diff = max(abs(float(model.loss(b)) - float(padded_loss(model, b))) for b in batches)
             ms = {"padded": [], "grouped": []}
             for _ in range(args.rounds):
-                for mode, loss_of in (("padded", lambda b: padded_loss(model, b)), ("grouped", model.loss)):
-                    start = time.perf_counter()
-                    for b in batches:
-                        loss = loss_of(b)
-                        model.zero_grad()
-                        loss.backward()
-                    ms[mode].append((time.perf_counter() - start) / len(batches) * 1000)
+                ms["padded"].append(gradient_ms(model, batches, lambda b: padded_loss(model, b)))
+                ms["grouped"].append(gradient_ms(model, batches, model.loss))
             padded, grouped = min(ms["padded"]), min(ms["grouped"])
             print(f"{env:<13} {method:<10} {padded_steps:>11.2f} {padded:>10.1f} {grouped:>10.1f} "
                   f"{padded / grouped:>7.2f}x {diff:>9.1e}", flush=True)
