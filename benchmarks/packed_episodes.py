@@ -34,6 +34,12 @@ def gradient_ms(model, batches: list[dict], loss_of) -> float:
     return (time.perf_counter() - start) / len(batches) * 1000
 
 
+def fastest_ms(model, rounds: int, *runs) -> list[float]:
+    """The fastest of ``rounds`` timings of each run ``(batches, loss_of)``, the runs taking turns."""
+    ms = [[gradient_ms(model, batches, loss_of) for batches, loss_of in runs] for _ in range(rounds)]
+    return [min(column) for column in zip(*ms)]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--envs", nargs="+", default=["keydoor", "multikeydoor"])
@@ -70,12 +76,8 @@ def main() -> None:
                     plain = {k: v for k, v in b.items() if k != "steps"}
                     assert torch.allclose(model.loss(b), model.loss(plain), atol=1e-5), "packed loss differs"
             model.train()
-            ms = {"padded": [], "packed": []}
             unpacked = [{k: v for k, v in b.items() if k != "steps"} for b in batches]
-            for _ in range(args.rounds):
-                ms["padded"].append(gradient_ms(model, unpacked, model.loss))
-                ms["packed"].append(gradient_ms(model, batches, model.loss))
-            padded, packed = min(ms["padded"]), min(ms["packed"])
+            padded, packed = fastest_ms(model, args.rounds, (unpacked, model.loss), (batches, model.loss))
             print(f"{env:<13} {method:<12} {padded_steps:>11.2f} {padded:>10.1f} {packed:>10.1f} "
                   f"{padded / packed:>7.2f}x", flush=True)
 

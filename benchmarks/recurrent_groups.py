@@ -22,7 +22,7 @@ pin_process()
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-from packed_episodes import gradient_ms  # noqa: E402  (benchmarks/, beside this script)
+from packed_episodes import fastest_ms  # noqa: E402  (benchmarks/, beside this script)
 
 
 def padded_loss(model, batch: dict) -> torch.Tensor:
@@ -69,11 +69,8 @@ def main() -> None:
             model = training.network_for(method, task.model_cfg)(task.model_cfg).train()
             with torch.no_grad():
                 diff = max(abs(float(model.loss(b)) - float(padded_loss(model, b))) for b in batches)
-            ms = {"padded": [], "grouped": []}
-            for _ in range(args.rounds):
-                ms["padded"].append(gradient_ms(model, batches, lambda b: padded_loss(model, b)))
-                ms["grouped"].append(gradient_ms(model, batches, model.loss))
-            padded, grouped = min(ms["padded"]), min(ms["grouped"])
+            padded, grouped = fastest_ms(model, args.rounds, (batches, lambda b: padded_loss(model, b)),
+                                         (batches, model.loss))
             print(f"{env:<13} {method:<10} {padded_steps:>11.2f} {padded:>10.1f} {grouped:>10.1f} "
                   f"{padded / grouped:>7.2f}x {diff:>9.1e}", flush=True)
 
