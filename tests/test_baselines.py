@@ -206,7 +206,7 @@ def test_options_agent_is_reproducible_with_its_seed(keydoor):
 
 
 @pytest.mark.parametrize("network, config", [(QNetwork, QNetworkConfig), (OptionCritic, OptionCriticConfig)])
-def test_online_agents_compute_each_distinct_state_once_to_the_same_bytes(keydoor, network, config):
+def test_online_agents_compute_each_distinct_state_once_to_the_same_actions(keydoor, network, config):
     """An online learner's agent computes its network on the distinct states of the batch only (copies in one
     state share a row): every copy's outputs are the network's on the whole batch up to rounding (a row's last
     bits follow the batch's size: OpenBLAS picks its kernels by shape), copies in one state get one row's bytes,

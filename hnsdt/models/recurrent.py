@@ -111,14 +111,13 @@ class RecurrentPolicy(Network, arch="recurrent", config=RecurrentConfig):
         mask = batch["mask"]
         total = mask.reshape(-1).float().sum().clamp(min=1.0)
         costs = GROUP_COSTS[self.cfg.cell]
-        groups = length_groups(mask.sum(1).cpu().numpy(), *costs) if costs else []
+        lengths = mask.sum(1).cpu().numpy() if costs else None
+        groups = length_groups(lengths, *costs) if costs else []
         if len(groups) <= 1:
             return self._nll_sum(batch) / total
-        nll = mask.new_zeros((), dtype=torch.float32)
-        for rows in groups:
-            T, rows = int(mask[rows[0]].sum()), torch.from_numpy(rows).to(mask.device)
-            nll = nll + self._nll_sum({k: v[rows, :T] for k, v in batch.items()})
-        return nll / total
+        parts = ({k: v[torch.from_numpy(rows).to(mask.device), :lengths[rows[0]]] for k, v in batch.items()}
+                 for rows in groups)  # (each group's rows longest first)
+        return sum(self._nll_sum(part) for part in parts) / total
 
     def _nll_sum(self, batch: dict) -> torch.Tensor:
         logits, sub_logits, _ = self(batch["states"], batch["prev_actions"], batch.get("subgoals"))
