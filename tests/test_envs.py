@@ -132,6 +132,24 @@ def test_render_modes(keydoor):
     assert tuple(img[8, 8]) == (220, 40, 40)  # the agent's disc at the centre of cell (0, 0)
 
 
+@pytest.mark.parametrize("px", [1, 5, 16])
+def test_an_rgb_frame_shows_each_cells_colour_and_the_agent_as_a_disc(keydoor, px):
+    from hnsdt.envs.render import CLASSES, COLOURS, cell_classes, render_rgb
+
+    state = np.array([2, 3, 1, 1])  # on the floor right of the open door, the key held
+    img = render_rgb(keydoor, state, px)
+    cells = np.array([[COLOURS[CLASSES[c]] for c in row] for row in cell_classes(keydoor, state)], dtype=np.uint8)
+    expected = cells.repeat(px, axis=0).repeat(px, axis=1)
+    assert img.shape == expected.shape and img.dtype == np.uint8
+    differs = (img != expected).any(-1)
+    agent_cell = np.zeros_like(differs)
+    agent_cell[2 * px:3 * px, 3 * px:4 * px] = True
+    assert not (differs & ~agent_cell).any()  # every other pixel is its cell's colour
+    assert (img[differs] == COLOURS["agent"]).all() and tuple(img[2 * px + px // 2, 3 * px + px // 2]) == COLOURS["agent"]
+    if px > 1:  # a disc: the cell's own colour shows at its corners
+        assert tuple(img[2 * px, 3 * px]) == COLOURS["floor"] and 0.3 < differs.sum() / px**2 < 0.5
+
+
 @pytest.mark.parametrize("kwargs,match", [
     ({"fail_prob": 1.5}, "fail_prob"), ({"max_steps": 0}, "max_steps"), ({"render_mode": "human"}, "render_mode"),
 ])

@@ -56,6 +56,20 @@ def test_rrd_reads_back_with_every_step_labelled_and_verified(tmp_path, keydoor)
     assert verify.returncode == 0 and "verified without error" in verify.stdout + verify.stderr
 
 
+def test_recording_files_are_what_the_writers_write(tmp_path, keydoor):
+    """What an evaluation's worker hands back (``recording_files``) is what the writers put on disk: the same
+    ``.mcap`` bytes, and the same ``.rrd`` recording (rerun's row ids are time-based, so not the same bytes)."""
+    from hnsdt.logs import recording_files
+
+    rec = record_from_episode("symbolic/keydoor/fp0.2/seed0/ep3", keydoor, _episode(keydoor))
+    files = recording_files(rec, episode_index=3)
+    assert set(files) == {".rrd", ".mcap"}
+    assert files[".mcap"] == write_mcap(tmp_path / "written.mcap", rec).read_bytes()
+    (tmp_path / "handed.rrd").write_bytes(files[".rrd"])
+    assert _rows(tmp_path / "handed.rrd") == _rows(write_rrd(tmp_path / "written.rrd", rec, episode_index=3))
+    assert RrdReader(str(tmp_path / "handed.rrd")).recordings()[0].recording_id == rec.episode_id
+
+
 def test_mcap_reads_back_with_foxglove_schemas_and_json_steps(tmp_path, keydoor):
     ep = _episode(keydoor)
     rec = record_from_episode("symbolic/keydoor/fp0.2/seed0/ep0", keydoor, ep)

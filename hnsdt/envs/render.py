@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from hnsdt.envs.layout import Layout
@@ -71,10 +73,18 @@ def cell_classes(layout: Layout, state: np.ndarray, cell_px: int = 1) -> np.ndar
 
 def render_rgb(layout: Layout, state: np.ndarray, cell_px: int = CELL_PX) -> np.ndarray:
     """An (H*px, W*px, 3) uint8 image: the cells in their colours and the agent as a disc."""
-    big = _PALETTE[cell_classes(layout, state, cell_px)]
+    # colours looked up per cell, then blown up (per pixel, the lookup was most of a recording's time)
+    big = np.repeat(np.repeat(_PALETTE[cell_classes(layout, state)], cell_px, axis=0), cell_px, axis=1)
     # The agent is a filled disc so the cell underneath (key, door, goal) stays visible at its corners.
+    r0, c0 = int(state[0]) * cell_px, int(state[1]) * cell_px
+    big[r0 : r0 + cell_px, c0 : c0 + cell_px][_disc(cell_px)] = COLOURS["agent"]
+    return big
+
+
+@lru_cache(maxsize=8)
+def _disc(cell_px: int) -> np.ndarray:
+    """The agent's pixels in its (px, px) cell."""
     yy, xx = np.mgrid[0:cell_px, 0:cell_px]
     disc = (yy - cell_px / 2 + 0.5) ** 2 + (xx - cell_px / 2 + 0.5) ** 2 <= (cell_px * 0.35) ** 2
-    r0, c0 = int(state[0]) * cell_px, int(state[1]) * cell_px
-    big[r0 : r0 + cell_px, c0 : c0 + cell_px][disc] = COLOURS["agent"]
-    return big
+    disc.flags.writeable = False
+    return disc

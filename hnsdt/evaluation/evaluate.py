@@ -284,7 +284,8 @@ class EvalTask:
     epsilon: float  # online methods' exploration
     batches: tuple[Batch, ...]
     rows: Callable[..., Any]
-    log_episodes: int = 0  # the paper protocol: the first this many episodes of each cell come back whole
+    log_episodes: int = 0  # the paper protocol: the first this many episodes of each cell come back recorded
+    provenance: dict | None = None  # ... with these facts in each recording (revision, params digest)
 
 
 def run_batch(task: EvalTask, batch: Batch) -> list[Episode]:
@@ -300,14 +301,34 @@ def evaluate_run(task: EvalTask) -> list:
 
 
 def cell_outputs(task: EvalTask, batch: Batch, episodes: list[Episode]) -> list[tuple]:
-    """The paper protocol's rows of each cell of a batch: ``(episode rows, segment rows, its first log_episodes
-    episodes)`` per cell, in the batch's order."""
+    """The paper protocol's rows of each cell of a batch: ``(episode rows, segment rows, recordings of its first
+    log_episodes episodes)`` per cell, in the batch's order (:func:`cell_recordings`)."""
     navigator = layout_navigator(batch.layout)
     out = []
     for cell, rows in zip(batch.key, equal_runs(batch.copies, len(batch.key), "cells")):
         eps = episodes[rows]
         out.append((episode_rows(cell, eps, batch.layout, task.executor), segment_rows(cell, eps, navigator),
-                    eps[:task.log_episodes]))
+                    cell_recordings(cell, batch.layout, eps[:task.log_episodes], task.provenance)))
+    return out
+
+
+def recording_path(cell: Cell, episode: int) -> Path:
+    """Where an episode's recordings lie in the recordings folder, without the suffix."""
+    return Path(cell.method) / cell.env / f"fp{cell.fail_prob:g}" / f"seed{cell.seed}" / f"ep{episode}"
+
+
+def cell_recordings(cell: Cell, layout: Layout, episodes: list[Episode], provenance: dict | None) -> list[dict]:
+    """Each episode's ``.rrd`` and ``.mcap`` files as bytes (:func:`hnsdt.logs.recording_files`), made where the
+    cell ran: rendering them was a fifth of the stage's time when the main process did it alone, after the runs."""
+    if not episodes:
+        return []
+    from hnsdt.logs import record_from_episode, recording_files
+
+    out = []
+    for i, ep in enumerate(episodes):
+        meta = {"method": cell.method, "env": cell.env, "fail_prob": cell.fail_prob, "seed": cell.seed, "episode": i}
+        out.append(recording_files(record_from_episode(cell.episode_id(i), layout, ep, meta | (provenance or {})),
+                                   episode_index=i))
     return out
 
 
@@ -341,7 +362,7 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
 
     from hnsdt.core.compute import Compute, run_tasks
     from hnsdt.core.fileio import atomic_dir
-    from hnsdt.logs import LAYOUT_NAME, record_from_episode, write_layout, write_mcap, write_rrd
+    from hnsdt.logs import LAYOUT_NAME, write_layout
 
     missing = set(ARMS) - set(executors)
     if missing:
@@ -359,7 +380,7 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
         batches = cell_batches(method, env, seed, settings.fail_probs, envs[env].layout, envs[env].max_steps,
                                settings.episodes)
         tasks.append(EvalTask(method, seed, executors[lookup_method(method).arm], model, meta,
-                              settings.eval_epsilon.get(method, 0.0), batches, cell_outputs, log))
+                              settings.eval_epsilon.get(method, 0.0), batches, cell_outputs, log, provenance))
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate", progress=progress)
     with atomic_dir(out) as tmp, atomic_dir(rec_out) as rec_tmp:
         tmp.mkdir()
@@ -371,16 +392,13 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
                                                  for fi, f in enumerate(settings.fail_probs)
                                                  for s in settings.seeds]:
             (per_cell,) = cells[(method, env, seed)]  # its one batch
-            cell_rows, cell_segs, logged = per_cell[fi]
-            cell = Cell(method, env, fail_prob, seed)
-            for i, ep in enumerate(logged):
-                rel = Path(method) / env / f"fp{fail_prob:g}" / f"seed{seed}" / f"ep{i}"
-                meta = {"method": method, "env": env, "fail_prob": fail_prob, "seed": seed, "episode": i}
-                rec = record_from_episode(cell.episode_id(i), envs[env].layout, ep, meta | (provenance or {}))
-                write_rrd(rec_tmp / rel.with_suffix(".rrd"), rec, episode_index=i)
-                write_mcap(rec_tmp / rel.with_suffix(".mcap"), rec)
-                cell_rows[i]["rrd"] = str(Path(rec_out.name) / rel.with_suffix(".rrd"))
-                cell_rows[i]["mcap"] = str(Path(rec_out.name) / rel.with_suffix(".mcap"))
+            cell_rows, cell_segs, recorded = per_cell[fi]
+            for i, files in enumerate(recorded):
+                rel = recording_path(Cell(method, env, fail_prob, seed), i)
+                (rec_tmp / rel.parent).mkdir(parents=True, exist_ok=True)
+                for suffix, data in files.items():  # (".rrd", ".mcap")
+                    (rec_tmp / rel.with_suffix(suffix)).write_bytes(data)
+                    cell_rows[i][suffix[1:]] = str(Path(rec_out.name) / rel.with_suffix(suffix))
             rows += cell_rows
             seg_rows += cell_segs
         table = pd.DataFrame(rows)
