@@ -319,7 +319,7 @@ def recording_path(cell: Cell, episode: int) -> Path:
 
 def cell_recordings(cell: Cell, layout: Layout, episodes: list[Episode], provenance: dict | None) -> list[dict]:
     """Each episode's ``.rrd`` and ``.mcap`` files as bytes (:func:`hnsdt.logs.recording_files`), made where the
-    cell ran: rendering them was a fifth of the stage's time when the main process did it alone, after the runs."""
+    cell ran (the main process, rendering and writing them alone after the runs, had spent most of its 14.6 s there)."""
     if not episodes:
         return []
     from hnsdt.logs import record_from_episode, recording_files
