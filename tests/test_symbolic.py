@@ -19,6 +19,31 @@ def test_phi_lists_the_true_predicates(multikeydoor):
     assert "Done" not in phi(multikeydoor, np.array([8, 8, 1, 0, 1, 0, 1, 0]))
 
 
+def test_phi_reads_the_observations_values_whatever_their_dtype(multikeydoor):
+    """(φ is cached by an observation's bytes: an int32 and an int64 vector with the same bytes hold other values.)"""
+    wide = np.array([8, 8, 1, 0, 1, 0, 1, 1])
+    narrow = wide.astype(np.int32)
+    assert phi(multikeydoor, wide) == phi(multikeydoor, narrow) == phi(multikeydoor, list(wide))
+    same_bytes = np.frombuffer(wide[:4].tobytes(), dtype=np.int32)  # [8, 0, 8, 0, 1, 0, 0, 0]
+    assert phi(multikeydoor, same_bytes) == {"At(8,0)", "HasKey(a)", "DoorOpen(A)"}
+
+
+def test_an_operator_sent_to_another_process_hashes_as_one_made_there(multikeydoor):
+    """Operators cache their hash (the executor hashes its plan at every step); a pickled one is rebuilt from its
+    fields, so a worker under another hash seed finds it in its own sets and caches."""
+    import pickle
+    import subprocess
+    import sys
+
+    op = plan(multikeydoor, SymbolicState.initial(multikeydoor))[0]
+    hash(op)  # (cached here, under this process's seed)
+    check = ("import pickle, sys; op = pickle.loads(sys.stdin.buffer.read()); "
+             "assert hash(op) == hash((op.kind, op.obj, op.target)), 'stale hash'; print(op.name)")
+    out = subprocess.run([sys.executable, "-c", check], input=pickle.dumps(op), capture_output=True,
+                         env={"PYTHONHASHSEED": "123", "PATH": ""}, check=True)
+    assert out.stdout.decode().strip() == op.name == "GoTo(key a)"
+
+
 def _exact_shortest_steps(layout, start_obs):
     """Breadth-first search over the full deterministic low-level state space (fail_prob 0)."""
     env = KeyDoorEnv(layout=layout, max_steps=10**6)

@@ -7,6 +7,7 @@ from φ(s). The low-level controller that turns the current operator into action
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -74,7 +75,7 @@ class PlanExecutor:
         return psi(op) if op is not None else NO_SUBGOAL
 
     def allowance(self, op: Operator) -> int:
-        return max(self.config.allowance_min, int(np.ceil(self.config.allowance_factor * op.cost)))
+        return max(self.config.allowance_min, math.ceil(self.config.allowance_factor * op.cost))
 
     def start(self, obs: np.ndarray) -> "PlanExecutor":
         self.t = 0

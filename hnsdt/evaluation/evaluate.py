@@ -131,21 +131,24 @@ def right_actions(episode: Episode, navigator) -> np.ndarray:
     lay = navigator.layout
     T = episode.length
     right = np.zeros(T, dtype=bool)
-    cells, actions, targets = episode.states[:T, :2], episode.actions, episode.subgoal_targets
-    for seg in episode.segments:
-        end = min(seg.end if seg.end is not None else T, T)
-        if end <= seg.start:
-            continue
-        span = slice(seg.start, end)
-        kind = seg.operator.split("(")[0]
-        if kind == "Move":
-            right[span] = step_towards(cells[span], targets[span]) == actions[span]
-        elif kind == "GoTo":
-            masks = episode.states[span][:, lay.door_flags] @ (1 << np.arange(len(lay.doors)))
-            idx = navigator.target_grid[targets[span, 0], targets[span, 1]]
-            right[span] = navigator.on_shortest_path(idx, masks, cells[span], actions[span])
-        else:
-            right[span] = actions[span] == PICK
+    spans = [(seg.start, min(seg.end if seg.end is not None else T, T), seg.operator.split("(")[0])
+             for seg in episode.segments]
+    spans = [(start, end, kind) for start, end, kind in spans if end > start]
+    if not spans:
+        return right
+    starts, ends, kinds = zip(*spans)  # every kind's steps at once (one segment per step under Move operators)
+    lengths = np.subtract(ends, starts)
+    steps = np.arange(lengths.sum()) + np.repeat(np.subtract(starts, np.cumsum(lengths) - lengths), lengths)
+    kind = np.repeat(np.array(kinds), lengths)
+    cells, actions, targets = episode.states[steps, :2], episode.actions[steps], episode.subgoal_targets[steps]
+    move, go = kind == "Move", kind == "GoTo"
+    right[steps[move]] = step_towards(cells[move], targets[move]) == actions[move]
+    if go.any():
+        masks = episode.states[steps[go]][:, lay.door_flags] @ (1 << np.arange(len(lay.doors)))
+        idx = navigator.target_grid[targets[go, 0], targets[go, 1]]
+        right[steps[go]] = navigator.on_shortest_path(idx, masks, cells[go], actions[go])
+    other = ~(move | go)
+    right[steps[other]] = actions[other] == PICK
     return right
 
 

@@ -196,6 +196,8 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         :meth:`forward_episode` on the whole episode (tested)."""
         x = self.step_tokens(states, prev_actions, timesteps, subgoal_ids, subgoal_targets, returns)
         slot, valid = cache.advance(rows)
+        if int(rows[-1]) == len(rows) - 1 and bool((slot == slot[0]).all()):  # rows 0 … n − 1 at one step (as
+            slot = int(slot[0])  # CachedContext steps them): every layer writes and reads its cache as views
         mask = torch.zeros(valid.shape, device=x.device).masked_fill(~valid, float("-inf"))[:, None, None, :]
         for i, layer in enumerate(self.blocks.layers):
             x = cached_layer(layer, x, cache.keys[i], cache.values[i], rows, slot, mask)
@@ -368,11 +370,16 @@ def cached_layer(layer: nn.TransformerEncoderLayer, x, keys, values, rows, slot,
     """One pre-norm encoder layer (eval mode) on one new token per row, its key and value written into the
     cache: the same computation as ``layer`` on the whole sequence under :func:`band_mask`. ``rows``: the
     cache rows of ``x``, sorted and distinct; ``mask``: additive, (n, 1, 1, h); ``keys`` transposed
-    ((N, heads, d / heads, h): the attention's product reads them so, without a copy)."""
+    ((N, heads, d / heads, h): the attention's product reads them so, without a copy); ``slot``: each row's
+    slot, or one for all when ``rows`` are 0 … n − 1."""
     n, d = x.shape
     q, k, v = _qkv(layer, x).unbind(1)  # (n, heads, d / heads) each
-    keys[rows, :, :, slot], values[rows, :, slot] = k, v
-    if n < len(keys):  # some rows are idle: read the first n if they are the live ones, else gather them
-        keys, values = (keys[:n], values[:n]) if int(rows[-1]) == n - 1 else (keys[rows], values[rows])
+    if isinstance(slot, int):
+        keys, values = keys[:n], values[:n]
+        keys[..., slot], values[:, :, slot] = k, v
+    else:
+        keys[rows, :, :, slot], values[rows, :, slot] = k, v
+        if n < len(keys):  # some rows are idle: read the first n if they are the live ones, else gather them
+            keys, values = (keys[:n], values[:n]) if int(rows[-1]) == n - 1 else (keys[rows], values[rows])
     out = attention(q[:, :, None], keys.transpose(-1, -2), values, mask)
     return _feed_forward(layer, x + _apply(layer.self_attn.out_proj, out.reshape(n, d)))

@@ -7,6 +7,7 @@ exit holding every item). :class:`SymbolicState` is the same information in a fo
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -42,8 +43,8 @@ class SymbolicState:
 
     @classmethod
     def from_observation(cls, layout: Layout, obs: np.ndarray) -> "SymbolicState":
-        cell, keys, doors, items = split_state(layout, obs)
-        return cls(cell, frozenset(keys), frozenset(doors), frozenset(items))
+        obs = np.asarray(obs)  # (cached by the observation's bytes: executors read every step of every episode)
+        return _from_observation(layout, obs.dtype.str, obs.shape, obs.tobytes())
 
     @classmethod
     def initial(cls, layout: Layout) -> "SymbolicState":
@@ -61,13 +62,24 @@ class SymbolicState:
         return self.cell == layout.goal and self.items >= set(layout.items)
 
     def predicates(self, layout: Layout) -> frozenset[str]:
-        preds = {at(self.cell)}
-        preds |= {has_key(k) for k in self.keys}
-        preds |= {door_open(d) for d in self.doors}
-        preds |= {has_item(i) for i in self.items}
-        if self.done(layout):
-            preds.add(DONE)
-        return frozenset(preds)
+        return _predicates(self, layout)
+
+
+@lru_cache(maxsize=65536)
+def _from_observation(layout: Layout, dtype: str, shape: tuple, data: bytes) -> SymbolicState:
+    cell, keys, doors, items = split_state(layout, np.frombuffer(data, dtype=dtype).reshape(shape))
+    return SymbolicState(cell, frozenset(keys), frozenset(doors), frozenset(items))
+
+
+@lru_cache(maxsize=65536)
+def _predicates(state: SymbolicState, layout: Layout) -> frozenset[str]:
+    preds = {at(state.cell)}
+    preds |= {has_key(k) for k in state.keys}
+    preds |= {door_open(d) for d in state.doors}
+    preds |= {has_item(i) for i in state.items}
+    if state.done(layout):
+        preds.add(DONE)
+    return frozenset(preds)
 
 
 def phi(layout: Layout, obs: np.ndarray) -> frozenset[str]:

@@ -23,6 +23,7 @@ Done is reached by the Move onto the exit holding every item).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 from hnsdt.envs.layout import MOVES, Cell, Layout, reachable_cells
 from hnsdt.symbolic.abstraction import DONE, SymbolicState, at, door_open, has_item, has_key
@@ -42,14 +43,18 @@ class Operator:
     eff: frozenset[str] = field(compare=False)
     cost: int = field(compare=False, default=1)
 
-    @property
+    @cached_property  # (computed once: the executors read it at every operator they start)
     def name(self) -> str:
-        return {
-            GOTO_KEY: f"GoTo(key {self.obj})", PICK_KEY: f"PickKey({self.obj})",
-            GOTO_DOOR: f"GoTo(door {self.obj})", OPEN_DOOR: f"OpenDoor({self.obj})",
-            GOTO_ITEM: f"GoTo(item {self.obj})", PICK_ITEM: f"PickItem({self.obj})",
-            GOTO_EXIT: "GoTo(exit)", MOVE: f"Move({self.obj}->{self.target[0]},{self.target[1]})",
-        }[self.kind]
+        return _NAMES[self.kind].format(obj=self.obj, r=self.target[0], c=self.target[1])
+
+    def __hash__(self) -> int:  # the generated one's value, computed once: the executor's plan check hashes
+        h = self.__dict__.get("_hash")  # the rest of its plan at every step
+        if h is None:
+            h = self.__dict__["_hash"] = hash((self.kind, self.obj, self.target))
+        return h
+
+    def __reduce__(self):  # rebuilt from its fields: a cached hash would be the pickling process's
+        return Operator, (self.kind, self.obj, self.target, self.pre, self.eff, self.cost)
 
     def __str__(self) -> str:
         return self.name
@@ -57,6 +62,11 @@ class Operator:
     def achieved(self, predicates: frozenset[str]) -> bool:
         """The paper's completion test: φ(s) ⊇ eff(o)."""
         return self.eff <= predicates
+
+
+_NAMES = {GOTO_KEY: "GoTo(key {obj})", PICK_KEY: "PickKey({obj})", GOTO_DOOR: "GoTo(door {obj})",
+          OPEN_DOOR: "OpenDoor({obj})", GOTO_ITEM: "GoTo(item {obj})", PICK_ITEM: "PickItem({obj})",
+          GOTO_EXIT: "GoTo(exit)", MOVE: "Move({obj}->{r},{c})"}
 
 
 def apply(op: Operator, s: SymbolicState) -> SymbolicState:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import string
 from dataclasses import dataclass
+from functools import lru_cache
 
 from hnsdt.envs.layout import Cell
 from hnsdt.symbolic.operators import (
@@ -54,6 +55,7 @@ def subgoal_id(op: Operator) -> int:
     return _BASE[op.kind] + (0 if op.kind == MOVE else _SYMBOLS[op.kind].index(op.obj))
 
 
+@lru_cache(maxsize=65536)  # (every executor asks for its operator's token at every step)
 def psi(op: Operator) -> SubGoal:
     """ψ(o): the sub-goal token that conditions the decision transformer while ``op`` executes."""
     return SubGoal(subgoal_id(op), op.target)
