@@ -124,6 +124,9 @@ def layout_navigator(layout: Layout):
     return Navigator(layout)
 
 
+_JUDGED_AS = {"Move": 1, "GoTo": 2}  # right_actions' kinds of operator; the others are judged as pick / open
+
+
 def right_actions(episode: Episode, navigator) -> np.ndarray:
     """Per step of a plan-following episode: was its action one that achieves the operator being pursued
     fastest? A Move: the step onto its target cell; a GoTo: a move one closer along some shortest path; pick and
@@ -131,24 +134,19 @@ def right_actions(episode: Episode, navigator) -> np.ndarray:
     lay = navigator.layout
     T = episode.length
     right = np.zeros(T, dtype=bool)
-    spans = [(seg.start, min(seg.end if seg.end is not None else T, T), seg.operator.split("(")[0])
-             for seg in episode.segments]
-    spans = [(start, end, kind) for start, end, kind in spans if end > start]
-    if not spans:
-        return right
-    starts, ends, kinds = zip(*spans)  # every kind's steps at once (one segment per step under Move operators)
-    lengths = np.subtract(ends, starts)
-    steps = np.arange(lengths.sum()) + np.repeat(np.subtract(starts, np.cumsum(lengths) - lengths), lengths)
-    kind = np.repeat(np.array(kinds), lengths)
-    cells, actions, targets = episode.states[steps, :2], episode.actions[steps], episode.subgoal_targets[steps]
-    move, go = kind == "Move", kind == "GoTo"
-    right[steps[move]] = step_towards(cells[move], targets[move]) == actions[move]
+    # per step: 0 no operator, 1 Move, 2 GoTo, 3 pick / open (a later segment's over an earlier one's); then
+    # each kind's steps at once (the paper's Move operators make one segment per step)
+    kind = np.zeros(T, dtype=np.int8)
+    for seg in episode.segments:
+        kind[seg.start:seg.end] = _JUDGED_AS.get(seg.operator.split("(")[0], 3)
+    cells, actions, targets = episode.states[:T, :2], episode.actions[:T], episode.subgoal_targets[:T]
+    move, go, other = kind == 1, kind == 2, kind == 3
+    right[move] = step_towards(cells[move], targets[move]) == actions[move]
     if go.any():
-        masks = episode.states[steps[go]][:, lay.door_flags] @ (1 << np.arange(len(lay.doors)))
+        masks = episode.states[:T][go][:, lay.door_flags] @ (1 << np.arange(len(lay.doors)))
         idx = navigator.target_grid[targets[go, 0], targets[go, 1]]
-        right[steps[go]] = navigator.on_shortest_path(idx, masks, cells[go], actions[go])
-    other = ~(move | go)
-    right[steps[other]] = actions[other] == PICK
+        right[go] = navigator.on_shortest_path(idx, masks, cells[go], actions[go])
+    right[other] = actions[other] == PICK
     return right
 
 
