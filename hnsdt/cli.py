@@ -211,6 +211,8 @@ def cmd_generalisation(args) -> None:
         section = f"unseen_experiments.{args.experiment}" if args.experiment else "generalisation"
         drawn = [f"{section}.drawn=" + json.dumps({"folder": args.drawn, "max_steps": args.drawn_max_steps})]
         params = unseen_experiment(load_params(args.params, drawn), args.experiment)
+    if args.splits and args.action != "evaluate":
+        raise ValueError("--splits is an option of generalisation evaluate")
     params.need("generalisation")  # "missing key generalisation" before any work
     if args.action == "collect":
         stages.collect_unseen(params, Path(args.out), progress=not args.quiet)
@@ -222,7 +224,8 @@ def cmd_generalisation(args) -> None:
         stages.train_unseen(params, args.method, Path(args.dataset), Path(args.out), Path(args.curves), compute,
                             progress=not args.quiet)
         return
-    stages.evaluate_unseen(params, Path(args.models), Path(args.out), compute, progress=not args.quiet)
+    stages.evaluate_unseen(params, Path(args.models), Path(args.out), compute, progress=not args.quiet,
+                           splits=args.splits)
 
 
 def _run_arguments(p: argparse.ArgumentParser, func) -> None:
@@ -320,6 +323,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "keys and doors), the split `drawn` in place of generalisation.drawn's folder")
     p.add_argument("--drawn-max-steps", type=int, default=250, help="evaluate: the episode step limit on the "
                    "--drawn maps (default: 250)")
+    p.add_argument("--splits", nargs="+", metavar="SPLIT", help="evaluate: only these splits (train, heldout, "
+                   "minigrid, minigrid_16x16, drawn, ... as the experiment names them; default: every one), e.g. "
+                   "`--drawn FOLDER --splits drawn` for your maps alone")
     p.add_argument("--experiment", help="a name of unseen_experiments in params.yaml: its changes to the "
                    "generalisation section apply")
     _run_arguments(p, cmd_generalisation)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Sequence
 
 from hnsdt.core.config import Params, compute_settings, load_params
 
@@ -127,9 +127,11 @@ def train_unseen(params: Params, method: str, dataset: Path, out: Path, curves: 
     print(f"wrote {', '.join(f'seed{r.seed}' for r in runs)} -> {out}/ (curves: {curves}/)")
 
 
-def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progress: bool = True):
+def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progress: bool = True,
+                    splits: Sequence[str] | None = None):
     """Stage `evaluate_generalisation`: every method × its seeds on every evaluated layout (training, held-out,
-    MiniGrid, drawn), the symbolic baseline as the reference, beside the exact optimum."""
+    MiniGrid, drawn), the symbolic baseline as the reference, beside the exact optimum; ``splits`` names the
+    splits to evaluate (default: every one)."""
     from hnsdt import generalisation as gen
     from hnsdt.core.config import eval_epsilon, layout_executor
     from hnsdt.core.methods import REFERENCE
@@ -138,12 +140,17 @@ def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progr
     g = params.need("generalisation")
     fps = tuple(float(f) for f in params.need("evaluate").fail_probs)
     sources = tuple(gen.layout_splits(params, evaluated_only=True))
+    if splits:
+        named = list(dict.fromkeys(s.split for s in sources))
+        unknown = [s for s in splits if s not in named]
+        if unknown:
+            raise ValueError(f"--splits: no split {', '.join(unknown)} here (the experiment's: {', '.join(named)})")
     gen.check_sources(sources, max(fps))
     methods = [*g.learned, REFERENCE]
     table = evaluate_layouts({m: g.seeds_of(m) for m in methods}, sources, fps, g.episodes,
                              {m: layout_executor(params, m) for m in methods},  # (generalisation.operators)
                              {m: eval_epsilon(params, m) for m in g.learned}, models, out,
-                             compute or compute_settings(params), progress)
+                             compute or compute_settings(params), progress, splits or None)
     print(f"wrote {out}/episodes.csv ({len(table)} episodes), summary.csv, segments.csv, layouts.csv")
     return table
 

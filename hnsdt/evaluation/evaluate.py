@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Collection
 
 import numpy as np
 import pandas as pd
@@ -459,15 +459,18 @@ def layout_rows(task: EvalTask, batch: Batch, episodes: list[Episode]) -> tuple[
     return rows, segments
 
 
-def layout_batches(seed: int, sources: tuple, fail_probs: tuple[float, ...], episodes: int) -> tuple[Batch, ...]:
+def layout_batches(seed: int, sources: tuple, fail_probs: tuple[float, ...], episodes: int,
+                   splits: Collection[str] | None = None) -> tuple[Batch, ...]:
     """One batch per run of consecutive sources with the same split and step limit (a split's maps): each map's
     episodes at every failure probability (copies with their own fail_prob) from its own env seed, every map of
-    the batch stepped together, one agent call per step for all (the same episodes as a batch per map)."""
+    the batch stepped together, one agent call per step for all (the same episodes as a batch per map).
+    ``splits``: only these splits' maps, each with the episodes it has among all (its seed is its place)."""
     from itertools import groupby
 
     per_layout = tuple(float(p) for p in np.repeat(np.asarray(fail_probs, dtype=np.float64), episodes))
+    kept = [(i, s) for i, s in enumerate(sources) if splits is None or s.split in splits]
     batches = []
-    for _, run in groupby(enumerate(sources), key=lambda item: (item[1].split, item[1].max_steps)):
+    for _, run in groupby(kept, key=lambda item: (item[1].split, item[1].max_steps)):
         indices, srcs = zip(*run)
         batches.append(Batch(tuple(s.layout for s in srcs), srcs[0].max_steps, len(per_layout) * len(srcs),
                              per_layout * len(srcs), tuple(episode_seed(seed, li) for li in indices),
@@ -477,19 +480,22 @@ def layout_batches(seed: int, sources: tuple, fail_probs: tuple[float, ...], epi
 
 def evaluate_layouts(seeds: dict[str, list[int]], sources: tuple, fail_probs: tuple[float, ...],
                      episodes: int, executors: dict[str, ExecutorConfig], epsilons: dict[str, float],
-                     models_root: str | Path, out_dir: str | Path, compute=None, progress: bool = True) -> pd.DataFrame:
+                     models_root: str | Path, out_dir: str | Path, compute=None, progress: bool = True,
+                     splits: Collection[str] | None = None) -> pd.DataFrame:
     """Every method (the keys of ``seeds``, in order) × its seeds on every source, ``episodes`` per layout and
     fail_prob (a seed's episodes are drawn from the seed, whichever method runs them), the checkpoints of view models
     at ``models_root/<method>/seed<K>``; write ``episodes.csv``, ``summary.csv`` (:func:`layout_summary`),
-    ``segments.csv`` and ``layouts.csv`` under ``out_dir``, with the exact optimum per layout and fail_prob."""
+    ``segments.csv`` and ``layouts.csv`` under ``out_dir``, with the exact optimum per layout and fail_prob.
+    ``splits``: only these splits' sources, with the episodes they have in the whole evaluation."""
     from hnsdt.core.compute import Compute, run_tasks
     from hnsdt.core.fileio import atomic_dir
 
     tasks = [EvalTask(method, seed, executors[method], *load_model(Path(models_root) / method / f"seed{seed}", method,
                                                                    view=True),
-                      epsilons.get(method, 0.0), layout_batches(seed, sources, fail_probs, episodes), layout_rows)
+                      epsilons.get(method, 0.0), layout_batches(seed, sources, fail_probs, episodes, splits), layout_rows)
              for method, method_seeds in seeds.items() for seed in method_seeds]
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
+    sources = tuple(s for s in sources if splits is None or s.split in splits)
     table = pd.DataFrame([row for batches in results for rows, _ in batches for row in rows])
     segments = pd.DataFrame([row for batches in results for _, rows in batches for row in rows])
     optimal = {(s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fail_probs}
