@@ -173,9 +173,11 @@ def cmd_replay(args) -> None:
     for row in rows.itertuples():
         print(f"{row.episode_id}: success={row.success}, steps={row.steps}, reward={row.reward}, "
               f"replans={row.replans}")
-    if (rows.rrd == "").any():
-        raise ValueError(f"episode {pattern} was not recorded (logs.episodes_per_cell in params.yaml sets how many "
-                         "episodes per cell are; recorded ones have rrd/mcap in episodes.csv)")
+    if (rows.rrd == "").any():  # (one episode: a pattern selects recorded ones)
+        rrd = _record_again(args, rows.iloc[0], table_path)
+        if args.open:
+            _open_in_rerun([rrd])
+        return
     base = Path(args.results).parent
     rrds = [base / r for r in rows.rrd]
     for r, m in zip(rows.rrd, rows.mcap):
@@ -185,6 +187,41 @@ def cmd_replay(args) -> None:
           + (f", with the layout {layout})" if layout.is_file() else ")"))
     if args.open:
         _open_in_rerun(rrds)
+
+
+def _record_again(args, row, table_path: Path) -> Path:
+    """An episode `evaluate` did not record (``logs.episodes_per_cell``), made again from its checkpoint and
+    seeds as `evaluate` ran it, checked against its row, and written to ``--out`` (default: its id as a file name
+    here, outside every pipeline output)."""
+    from hnsdt.core import stages
+    from hnsdt.core.config import compute_settings, env_spec, evaluate_settings, executor_config, load_params
+    from hnsdt.core.fileio import atomic_file
+    from hnsdt.core.methods import ARMS
+    from hnsdt.evaluation.evaluate import Cell, rerun_episode
+
+    params = load_params(args.params)
+    settings = evaluate_settings(params)
+    if row["env"] not in settings.envs:
+        raise ValueError(f"{row['episode_id']}: env {row['env']} is not in train.envs of {args.params}")
+    print(f"not recorded: running {row['method']} on {row['env']} with seed {row['seed']} again, as `evaluate` ran "
+          f"it ({len(settings.fail_probs)} x {settings.episodes} episodes)", flush=True)
+    outcome, files = rerun_episode(settings, {e: env_spec(params, e) for e in settings.envs},
+                                   {arm: executor_config(params, arm) for arm in ARMS}, args.models,
+                                   Cell(row["method"], row["env"], float(row["fail_prob"]), int(row["seed"])),
+                                   int(row["episode"]), compute_settings(params).threads,
+                                   stages._provenance(params))
+    listed = {"success": bool(row["success"]), "steps": int(row["steps"]), "reward": float(row["reward"]),
+              "replans": int(row["replans"])}
+    if outcome != listed:
+        raise ValueError(f"{row['episode_id']} ran again to {outcome}, not to {listed} as in {table_path}: the models, "
+                         "params or code changed since that evaluation (`dvc status` says which)")
+    out = Path(args.out or row["episode_id"].replace("/", "-") + ".rrd")
+    for path, data in ((out, files[".rrd"]), (out.with_suffix(".mcap"), files[".mcap"])):
+        with atomic_file(path) as tmp:
+            tmp.write_bytes(data)
+    print(f"  {out}\n  {out.with_suffix('.mcap')}\nthe same steps as evaluated; open with: rerun {out}   (or load "
+          f"{out.with_suffix('.mcap')} in Foxglove)")
+    return out
 
 
 def _open_in_rerun(rrds: list[Path]) -> None:
@@ -352,7 +389,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--results", default="results")
     p.add_argument("--dataset", help="instead, render an episode of this collected LeRobot dataset folder")
     p.add_argument("--episode", type=int, default=0, help="with --dataset: the episode index")
-    p.add_argument("--out", help="with --dataset: the .rrd to write (an .mcap is written beside it)")
+    p.add_argument("--models", default="models", help="an episode that was not recorded is run again from these "
+                   "checkpoints and recorded (default: models)")
+    p.add_argument("--out", help="with --dataset, or an episode that was not recorded: the .rrd to write (an .mcap "
+                   "is written beside it; default: the episode's id as a file name, here)")
     p.add_argument("--open", action="store_true", help="start the rerun viewer on the recording")
     p.set_defaults(func=cmd_replay)
     return parser

@@ -140,17 +140,42 @@ def test_every_stage_depends_on_the_code_it_runs(repo_copy, first_run):
     assert changed_stages(repo_copy) == set()
 
 
-def test_replay_points_to_an_evaluated_episode(repo_copy):
+def test_replay_points_to_an_evaluated_episode(repo_copy, tmp_path):
     out = hnsdt_cli("replay", "hnsdt/keydoor/fp0.2/seed0/ep0", cwd=repo_copy)
     assert out.returncode == 0, out.stderr
     assert "recordings/hnsdt/keydoor/fp0.2/seed0/ep0.rrd" in out.stdout and ".mcap" in out.stdout
-    missing = hnsdt_cli("replay", "hnsdt/keydoor/fp0.2/seed0/ep3", cwd=repo_copy)
-    assert missing.returncode == 2 and "was not recorded" in missing.stderr
+    # an episode that was not recorded is made again from its checkpoint and seeds and checked against its row
+    again = hnsdt_cli("replay", "hnsdt/keydoor/fp0.2/seed0/ep3", "--out", tmp_path / "ep3.rrd", cwd=repo_copy)
+    assert again.returncode == 0 and "the same steps as evaluated" in again.stdout, again.stderr
+    assert (tmp_path / "ep3.rrd").stat().st_size and (tmp_path / "ep3.mcap").stat().st_size
     cell = hnsdt_cli("replay", "*/keydoor/fp0.2/seed0/ep0", cwd=repo_copy)  # every method's episode of one cell
     assert cell.returncode == 0, cell.stderr
     opened = cell.stdout.splitlines()[-1]
     assert opened.startswith("open with: rerun ") and opened.count(".rrd") == len(METHODS)
     assert "foxglove_layout.json" in opened
+
+
+def test_an_episode_made_again_is_the_evaluated_one_to_the_bit(repo_copy):
+    """`hnsdt replay` of an episode that was not recorded runs its method × env × seed again
+    (:func:`rerun_episode`); made so, every method's recorded episode gives the evaluation's own .mcap file (every
+    state, action, sub-goal and reward; the .rrd files carry time-based row ids)."""
+    import contextlib
+
+    from hnsdt.core.config import env_spec, evaluate_settings, executor_config, load_params
+    from hnsdt.core.methods import ARMS
+    from hnsdt.evaluation.evaluate import Cell, rerun_episode
+
+    with contextlib.chdir(repo_copy):  # (the params' layout paths are the repo's)
+        params = load_params("params.yaml")
+        settings = evaluate_settings(params)
+        envs = {e: env_spec(params, e) for e in settings.envs}
+        executors = {arm: executor_config(params, arm) for arm in ARMS}
+        for method in settings.methods:
+            outcome, files = rerun_episode(settings, envs, executors, "models", Cell(method, "keydoor", 0.2, 0), 0)
+            recorded = Path(f"recordings/{method}/keydoor/fp0.2/seed0/ep0.mcap")
+            assert files[".mcap"] == recorded.read_bytes(), method
+        with pytest.raises(ValueError, match=r"hnsdt/keydoor/fp0.5/seed0/ep0: not an episode of this evaluation"):
+            rerun_episode(settings, envs, executors, "models", Cell("hnsdt", "keydoor", 0.5, 0), 0)
 
 
 def test_the_lock_file_holds_exactly_the_pipelines_stages():

@@ -14,6 +14,8 @@ import tempfile
 from pathlib import Path
 
 TMP_PREFIX = ".hnsdt-tmp-"
+_UMASK = os.umask(0o022)  # (reading the umask sets it: put it back)
+os.umask(_UMASK)
 
 
 def _pid_alive(pid: int) -> bool:
@@ -63,6 +65,7 @@ def atomic_file(out: str | Path):
     out.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(out)
     fd, name = tempfile.mkstemp(prefix=_temp_prefix(out), dir=out.parent)
+    os.fchmod(fd, 0o666 & ~_UMASK)  # the mode a plain open() gives (mkstemp's is 0600: only its owner could read)
     os.close(fd)
     tmp = Path(name)
     try:

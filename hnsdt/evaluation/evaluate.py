@@ -318,15 +318,17 @@ def recording_path(cell: Cell, episode: int) -> Path:
     return Path(cell.method) / cell.env / f"fp{cell.fail_prob:g}" / f"seed{cell.seed}" / f"ep{episode}"
 
 
-def cell_recordings(cell: Cell, layout: Layout, episodes: list[Episode], provenance: dict | None) -> list[dict]:
+def cell_recordings(cell: Cell, layout: Layout, episodes: list[Episode], provenance: dict | None,
+                    first: int = 0) -> list[dict]:
     """Each episode's ``.rrd`` and ``.mcap`` files as bytes (:func:`hnsdt.logs.recording_files`), made where the
-    cell ran (the main process, rendering and writing them alone after the runs, had spent most of its 14.6 s there)."""
+    cell ran (the main process, rendering and writing them alone after the runs, had spent most of its 14.6 s there);
+    ``episodes`` are the cell's from its episode ``first`` on."""
     if not episodes:
         return []
     from hnsdt.logs import record_from_episode, recording_files
 
     out = []
-    for i, ep in enumerate(episodes):
+    for i, ep in enumerate(episodes, first):
         meta = {"method": cell.method, "env": cell.env, "fail_prob": cell.fail_prob, "seed": cell.seed, "episode": i}
         out.append(recording_files(record_from_episode(cell.episode_id(i), layout, ep, meta | (provenance or {})),
                                    episode_index=i))
@@ -342,6 +344,18 @@ def cell_batches(method: str, env: str, seed: int, fail_probs, layout: Layout, m
     per_copy = tuple(float(c.fail_prob) for c in cells for _ in range(episodes))
     seeds = tuple(cell_seed(cell, fi) for fi, cell in enumerate(cells))
     return (Batch(layout, max_steps, len(per_copy), per_copy, seeds, cells),)
+
+
+def cell_task(settings, envs: dict, executors: dict[str, ExecutorConfig], models_root: str | Path, method: str,
+              env: str, seed: int, rows: Callable[..., Any] = cell_outputs, log_episodes: int = 0,
+              provenance: dict | None = None) -> EvalTask:
+    """The paper protocol's task of one method × env × seed (:func:`evaluate_all`): its trained model and its one
+    batch, every fail_prob's cell."""
+    model, meta = load_model(checkpoint_dir(models_root, env, method, seed), method, settings.device)
+    batches = cell_batches(method, env, seed, settings.fail_probs, envs[env].layout, envs[env].max_steps,
+                           settings.episodes)
+    return EvalTask(method, seed, executors[lookup_method(method).arm], model, meta,
+                    settings.eval_epsilon.get(method, 0.0), batches, rows, log_episodes, provenance)
 
 
 def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], models_root: str | Path,
@@ -373,15 +387,12 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
     groups = [(m, e, s) for m in settings.methods for e in settings.envs for s in settings.seeds]
     tasks, params_count, usage = [], {}, []
     for method, env, seed in groups:
-        model, meta = load_model(checkpoint_dir(models_root, env, method, seed), method, settings.device)
-        if model is not None:
-            params_count[f"{env}/{method}"] = sum(p.numel() for p in model.parameters())
-            usage.append(training_usage(models_root, env, method, seed))
         log = settings.log_episodes if seed == settings.seeds[0] else 0
-        batches = cell_batches(method, env, seed, settings.fail_probs, envs[env].layout, envs[env].max_steps,
-                               settings.episodes)
-        tasks.append(EvalTask(method, seed, executors[lookup_method(method).arm], model, meta,
-                              settings.eval_epsilon.get(method, 0.0), batches, cell_outputs, log, provenance))
+        tasks.append(cell_task(settings, envs, executors, models_root, method, env, seed, cell_outputs, log,
+                               provenance))
+        if tasks[-1].model is not None:
+            params_count[f"{env}/{method}"] = sum(p.numel() for p in tasks[-1].model.parameters())
+            usage.append(training_usage(models_root, env, method, seed))
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate", progress=progress)
     with atomic_dir(out) as tmp, atomic_dir(rec_out) as rec_tmp:
         tmp.mkdir()
@@ -423,6 +434,35 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
         summ.to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
         (tmp / "metrics.json").write_text(json.dumps(metrics_json(summ), indent=2, sort_keys=True) + "\n")
     return table
+
+
+def episode_recording(cell_index: int, episode: int, task: EvalTask, batch: Batch,
+                      episodes: list[Episode]) -> tuple[dict, dict]:
+    """The ``rows`` of a task re-run for one of its episodes (:func:`rerun_episode`): that episode's outcome, as
+    ``episodes.csv`` has it, and its recordings."""
+    cell = batch.key[cell_index]
+    ep = episodes[equal_runs(batch.copies, len(batch.key), "cells")[cell_index]][episode]
+    outcome = {"success": bool(ep.success), "steps": ep.length, "reward": round(ep.ret, 6), "replans": ep.replans}
+    return outcome, cell_recordings(cell, batch.layout, [ep], task.provenance, first=episode)[0]
+
+
+def rerun_episode(settings, envs: dict, executors: dict[str, ExecutorConfig], models_root: str | Path, cell: Cell,
+                  episode: int, threads: int = 1, provenance: dict | None = None) -> tuple[dict, dict]:
+    """An evaluated episode made again, for an episode that was not recorded: its method × env × seed run as
+    :func:`evaluate_all` ran it (every fail_prob's episodes stepped together from the same seeds, ``threads`` torch
+    threads), so that the episode is the evaluation's to the bit; ``(its outcome, its .rrd and .mcap bytes)``."""
+    from functools import partial
+
+    from hnsdt.core.compute import Compute, run_tasks
+
+    if cell.fail_prob not in settings.fail_probs or not 0 <= episode < settings.episodes:
+        raise ValueError(f"{cell.episode_id(episode)}: not an episode of this evaluation (evaluate.fail_probs "
+                         f"{list(settings.fail_probs)}, evaluate.episodes {settings.episodes})")
+    rows = partial(episode_recording, settings.fail_probs.index(cell.fail_prob), episode)
+    task = cell_task(settings, envs, executors, models_root, cell.method, cell.env, cell.seed, rows,
+                     provenance=provenance)
+    ((outcome, files),), = run_tasks(evaluate_run, [task], Compute(workers=1, threads=threads), progress=False)
+    return outcome, files
 
 
 # -- many layouts (the unseen-layout experiment) ----------------------------------------------------------
