@@ -195,7 +195,6 @@ def _record_again(args, row, table_path: Path) -> Path:
     here, outside every pipeline output)."""
     from hnsdt.core import stages
     from hnsdt.core.config import compute_settings, env_spec, evaluate_settings, executor_config, load_params
-    from hnsdt.core.fileio import atomic_file
     from hnsdt.core.methods import ARMS
     from hnsdt.evaluation.evaluate import Cell, rerun_episode
 
@@ -215,7 +214,13 @@ def _record_again(args, row, table_path: Path) -> Path:
     if outcome != listed:
         raise ValueError(f"{row['episode_id']} ran again to {outcome}, not to {listed} as in {table_path}: the models, "
                          "params or code changed since that evaluation (`dvc status` says which)")
-    out = Path(args.out or row["episode_id"].replace("/", "-") + ".rrd")
+    return _write_recording(files, Path(args.out or row["episode_id"].replace("/", "-") + ".rrd"))
+
+
+def _write_recording(files: dict[str, bytes], out: Path) -> Path:
+    """An episode made again: its ``.rrd`` at ``out`` and its ``.mcap`` beside it."""
+    from hnsdt.core.fileio import atomic_file
+
     for path, data in ((out, files[".rrd"]), (out.with_suffix(".mcap"), files[".mcap"])):
         with atomic_file(path) as tmp:
             tmp.write_bytes(data)
@@ -243,14 +248,28 @@ def cmd_generalisation(args) -> None:
 
     params = unseen_experiment(load_params(args.params), args.experiment)  # (an unknown name: one line)
     if args.drawn:  # a folder of the user's maps in place of the experiment's drawn maps
-        if args.action != "evaluate":
-            raise ValueError("--drawn is an option of generalisation evaluate")
+        if args.action not in ("evaluate", "replay"):
+            raise ValueError("--drawn is an option of generalisation evaluate and replay")
         section = f"unseen_experiments.{args.experiment}" if args.experiment else "generalisation"
         drawn = [f"{section}.drawn=" + json.dumps({"folder": args.drawn, "max_steps": args.drawn_max_steps})]
         params = unseen_experiment(load_params(args.params, drawn), args.experiment)
     if args.splits and args.action != "evaluate":
         raise ValueError("--splits is an option of generalisation evaluate")
     params.need("generalisation")  # "missing key generalisation" before any work
+    if args.action == "replay":
+        if not args.episode:
+            raise ValueError("generalisation replay needs --episode METHOD/seedK/LAYOUT/fpP/epI")
+        row, files = stages.replay_unseen(params, Path(args.models), Path(args.results), args.episode,
+                                          compute_settings(params).threads)
+        print(f"{args.episode} ({row['split']}): success={row['success']}, steps={row['steps']} (the optimum's "
+              f"{row['optimal_steps']:g}), reward={row['reward']}")
+        name = f"{row['method']}-seed{row['seed']}-{Path(row['layout']).stem}-fp{row['fail_prob']:g}-ep{row['episode']}"
+        rrd = _write_recording(files, Path(args.out or name + ".rrd"))
+        if args.open:
+            _open_in_rerun([rrd])
+        return
+    if not args.out:
+        raise ValueError(f"generalisation {args.action} needs --out")
     if args.action == "collect":
         stages.collect_unseen(params, Path(args.out), progress=not args.quiet)
         return
@@ -348,17 +367,24 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("generalisation", help="the unseen-layout experiment: collect on generated layouts, "
                        "train a method on views, evaluate on training / held-out / MiniGrid layouts (the "
                        "`*_generalisation` stages)")
-    p.add_argument("action", choices=["collect", "train", "evaluate"])
-    p.add_argument("--out", required=True, help="collect: dataset folder; train: checkpoints folder (one seedK/ "
-                   "per seed); evaluate: results folder")
+    p.add_argument("action", choices=["collect", "train", "evaluate", "replay"])
+    p.add_argument("--out", help="collect: dataset folder; train: checkpoints folder (one seedK/ per seed); "
+                   "evaluate: results folder; replay: the .rrd to write (an .mcap beside it; default: named after "
+                   "the episode, here)")
     p.add_argument("--method", choices=LEARNED, help="train: the method")
     p.add_argument("--dataset", default="generalisation/dataset", help="train: the collected dataset")
     p.add_argument("--curves", help="train: training-curve folder")
-    p.add_argument("--models", default="generalisation/models", help="evaluate: checkpoint root, one folder per "
-                   "method")
-    p.add_argument("--drawn", help="evaluate: a folder of layout files (*.txt, maps of any shape with the family's "
+    p.add_argument("--models", default="generalisation/models", help="evaluate, replay: checkpoint root, one folder "
+                   "per method")
+    p.add_argument("--episode", help="replay: an evaluated episode, METHOD/seedK/LAYOUT/fpP/epI of the columns of "
+                   "episodes.csv (e.g. hnsdt/seed0/layouts/drawn/spiral_9x9.txt/fp0.1/ep3), made again from its "
+                   "checkpoint and seeds, checked against its row and recorded (.rrd for rerun, .mcap for Foxglove)")
+    p.add_argument("--results", default="generalisation/results", help="replay: the evaluation's results folder "
+                   "(with --drawn: where `generalisation evaluate --drawn` wrote)")
+    p.add_argument("--open", action="store_true", help="replay: start the rerun viewer on the recording")
+    p.add_argument("--drawn", help="evaluate, replay: a folder of layout files (*.txt, maps of any shape with the family's "
                    "keys and doors), the split `drawn` in place of generalisation.drawn's folder")
-    p.add_argument("--drawn-max-steps", type=int, default=250, help="evaluate: the episode step limit on the "
+    p.add_argument("--drawn-max-steps", type=int, default=250, help="evaluate, replay: the episode step limit on the "
                    "--drawn maps (default: 250)")
     p.add_argument("--splits", nargs="+", metavar="SPLIT", help="evaluate: only these splits (train, heldout, "
                    "minigrid, minigrid_16x16, drawn, ... as the experiment names them; default: every one), e.g. "

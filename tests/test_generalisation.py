@@ -589,6 +589,26 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     assert out.returncode == 2 and out.stderr.strip() == (
         "hnsdt: error: --splits: no split nope here (the experiment's: train, heldout, minigrid, drawn)")
     assert not (tmp_path / "res").exists()
+    # any evaluated episode is made again from its checkpoint and seeds and recorded (`generalisation replay`),
+    # checked against its row: the reference's every episode (their steps differ at fail_prob 0.2), one each else
+    from hnsdt.evaluation.evaluate import layout_episode_id
+
+    ids = [layout_episode_id(*key) for key in zip(table.method, table.seed, table.layout, table.fail_prob,
+                                                  table.episode)]
+    chosen = [i for i, m in zip(ids, table.method) if m == "symbolic"] + [
+        "hnsdt/seed0/" + table.layout.iloc[-1] + "/fp0.2/ep1", "gru/seed2/keydoor_maze-0/fp0/ep0",
+        "dqn/seed0/" + table.layout.iloc[-1] + "/fp0.2/ep0"]
+    assert len(set(table[table.method == "symbolic"].steps)) > 1
+    for episode_id in chosen:
+        row, files = stages.replay_unseen(validate(params), tmp_path / "models", tmp_path / "results", episode_id)
+        assert files[".mcap"].startswith(b"\x89MCAP") and files[".rrd"], episode_id
+    out = hnsdt_cli("generalisation", "replay", "--episode", chosen[-1], "--models", tmp_path / "models",
+                    "--results", tmp_path / "results", "--out", tmp_path / "ep.rrd", cwd=tmp_path)
+    assert out.returncode == 0 and "the same steps as evaluated" in out.stdout, out.stderr
+    assert (tmp_path / "ep.rrd").stat().st_size and (tmp_path / "ep.mcap").stat().st_size
+    out = hnsdt_cli("generalisation", "replay", "--episode", "hnsdt/seed0/nowhere/fp0/ep0", "--models",
+                    tmp_path / "models", "--results", tmp_path / "results", cwd=tmp_path)
+    assert out.returncode == 2 and out.stderr.startswith("hnsdt: error: no episode 'hnsdt/seed0/nowhere/fp0/ep0'")
     with pytest.raises(ValueError, match="not in generalisation.methods"):
         stages.plan_unseen(validate(params), "options", dataset)
 

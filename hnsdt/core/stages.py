@@ -155,6 +155,42 @@ def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progr
     return table
 
 
+def replay_unseen(params: Params, models: Path, results: Path, episode_id: str, threads: int = 1) -> tuple[dict, dict]:
+    """An evaluated unseen-layout episode (``METHOD/seedK/LAYOUT/fpP/epI``, a row of ``results``/episodes.csv) made
+    again and recorded (:func:`hnsdt.evaluation.evaluate.rerun_layout_episode`), checked against its row;
+    ``(its row, its .rrd and .mcap bytes)``."""
+    import pandas as pd
+
+    from hnsdt import generalisation as gen
+    from hnsdt.core.config import eval_epsilon, layout_executor
+    from hnsdt.evaluation.evaluate import layout_episode_id, rerun_layout_episode
+
+    table_path = Path(results) / "episodes.csv"
+    if not table_path.is_file():
+        raise FileNotFoundError(f"{table_path}: no unseen-layout results (run `dvc repro evaluate_generalisation`, "
+                                "or `hnsdt generalisation evaluate --out` and point --results there)")
+    table = pd.read_csv(table_path)
+    ids = [layout_episode_id(*key) for key in zip(table.method, table.seed, table.layout, table.fail_prob,
+                                                  table.episode)]
+    if episode_id not in ids:
+        raise ValueError(f"no episode {episode_id!r} in {table_path} (ids are METHOD/seedK/LAYOUT/fpP/epI of its "
+                         f"columns, e.g. {ids[0]!r})")
+    row = table.iloc[ids.index(episode_id)]
+    fps = tuple(float(f) for f in params.need("evaluate").fail_probs)
+    sources = tuple(gen.layout_splits(params, evaluated_only=True))
+    outcome, files = rerun_layout_episode(sources, fps, params.need("generalisation").episodes, models,
+                                          row["method"], int(row["seed"]), layout_executor(params, row["method"]),
+                                          eval_epsilon(params, row["method"]), row["layout"],
+                                          float(row["fail_prob"]), int(row["episode"]), threads,
+                                          _provenance(params))
+    listed = {"success": bool(row["success"]), "steps": int(row["steps"]), "reward": float(row["reward"])}
+    outcome["reward"] = float(f"{outcome['reward']:.6g}")  # (as episodes.csv writes it)
+    if outcome != listed:
+        raise ValueError(f"{episode_id} ran again to {outcome}, not to {listed} as in {table_path}: the models, "
+                         "params, maps or code changed since that evaluation")
+    return row, files
+
+
 def run_unseen_experiment(params: Params, out: Path, compute=None, progress: bool = True):
     """Stage `unseen_experiment@NAME` (``params`` as :func:`hnsdt.core.config.unseen_experiment` gives them): the
     three stages above in one process — ``out``/dataset, ``out``/models/METHOD and ``out``/curves/METHOD for

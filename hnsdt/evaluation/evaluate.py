@@ -552,6 +552,57 @@ def evaluate_layouts(seeds: dict[str, list[int]], sources: tuple, fail_probs: tu
     return table
 
 
+def layout_episode_id(method: str, seed: int, layout: str, fail_prob: float, episode: int) -> str:
+    """An unseen-layout episode's id: ``METHOD/seedK/LAYOUT/fpP/epI`` (the layout's name may hold slashes)."""
+    return f"{method}/seed{seed}/{layout}/fp{fail_prob:g}/ep{episode}"
+
+
+def layout_episode_recording(layout: str, fail_prob: float, episode: int, task: EvalTask, batch: Batch,
+                             episodes: list[Episode]) -> tuple[dict, dict]:
+    """The ``rows`` of an unseen-layout task re-run for one of its episodes (:func:`rerun_layout_episode`): that
+    episode's outcome, as ``episodes.csv`` has it, and its recordings."""
+    from hnsdt.logs import record_from_episode, recording_files
+
+    sources, per_fail_prob = batch.key
+    k = [s.name for s in sources].index(layout)
+    run = equal_runs(batch.copies, len(sources), "layouts")[k]
+    first = next(i for i in range(run.start, run.stop) if batch.fail_prob[i] == fail_prob)
+    ep = episodes[first + episode]
+    meta = {"method": task.method, "seed": task.seed, "split": sources[k].split, "layout": layout,
+            "fail_prob": fail_prob, "episode": episode}
+    rec = record_from_episode(layout_episode_id(task.method, task.seed, layout, fail_prob, episode), sources[k].layout,
+                              ep, meta | (task.provenance or {}))
+    outcome = {"success": bool(ep.success), "steps": ep.length, "reward": round(ep.ret, 6)}
+    return outcome, recording_files(rec, episode_index=episode)
+
+
+def rerun_layout_episode(sources: tuple, fail_probs: tuple[float, ...], episodes: int, models_root: str | Path,
+                         method: str, seed: int, executor: ExecutorConfig, epsilon: float, layout: str,
+                         fail_prob: float, episode: int, threads: int = 1,
+                         provenance: dict | None = None) -> tuple[dict, dict]:
+    """An unseen-layout episode made again: its method and seed on the maps of its split, stepped together from
+    the same seeds as :func:`evaluate_layouts` ran them (each map's seed is its place among ``sources``), so that
+    the episode is the evaluation's to the bit; ``(its outcome, its .rrd and .mcap bytes)``."""
+    from functools import partial
+
+    from hnsdt.core.compute import Compute, run_tasks
+
+    src = next((s for s in sources if s.name == layout), None)
+    episode_id = layout_episode_id(method, seed, layout, fail_prob, episode)
+    if src is None:
+        raise ValueError(f"{episode_id}: no layout {layout} among this evaluation's")
+    if fail_prob not in fail_probs or not 0 <= episode < episodes:
+        raise ValueError(f"{episode_id}: not an episode of this evaluation (evaluate.fail_probs {list(fail_probs)}, "
+                         f"generalisation.episodes {episodes})")
+    batch = next(b for b in layout_batches(seed, sources, fail_probs, episodes, {src.split})
+                 if layout in [s.name for s in b.key[0]])
+    model, meta = load_model(Path(models_root) / method / f"seed{seed}", method, view=True)
+    task = EvalTask(method, seed, executor, model, meta, epsilon, (batch,),
+                    partial(layout_episode_recording, layout, fail_prob, episode), 0, provenance)
+    ((outcome, files),), = run_tasks(evaluate_run, [task], Compute(workers=1, threads=threads), progress=False)
+    return outcome, files
+
+
 def layout_summary(table: pd.DataFrame) -> pd.DataFrame:
     """Per method × split × fail_prob: success and steps / optimum (successful episodes), mean and std over
     seeds; each seed's values are means over its layouts' episodes; the exact optimum's success beside them."""
