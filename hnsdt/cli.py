@@ -253,8 +253,8 @@ def cmd_generalisation(args) -> None:
         section = f"unseen_experiments.{args.experiment}" if args.experiment else "generalisation"
         drawn = [f"{section}.drawn=" + json.dumps({"folder": args.drawn, "max_steps": args.drawn_max_steps})]
         params = unseen_experiment(load_params(args.params, drawn), args.experiment)
-    if args.splits and args.action != "evaluate":
-        raise ValueError("--splits is an option of generalisation evaluate")
+    if (args.splits or args.methods) and args.action != "evaluate":
+        raise ValueError("--splits and --methods are options of generalisation evaluate")
     params.need("generalisation")  # "missing key generalisation" before any work
     if args.action == "replay":
         if not args.episode:
@@ -281,7 +281,7 @@ def cmd_generalisation(args) -> None:
                             progress=not args.quiet)
         return
     stages.evaluate_unseen(params, Path(args.models), Path(args.out), compute, progress=not args.quiet,
-                           splits=args.splits)
+                           splits=args.splits, methods=args.methods)
 
 
 def _run_arguments(p: argparse.ArgumentParser, func) -> None:
@@ -389,6 +389,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--splits", nargs="+", metavar="SPLIT", help="evaluate: only these splits (train, heldout, "
                    "minigrid, minigrid_16x16, drawn, ... as the experiment names them; default: every one), e.g. "
                    "`--drawn FOLDER --splits drawn` for your maps alone")
+    p.add_argument("--methods", nargs="+", metavar="METHOD", help="evaluate: only these learned methods (the "
+                   "symbolic reference runs always; default: every one), e.g. --methods hnsdt pure_dt")
     p.add_argument("--experiment", help="a name of unseen_experiments in params.yaml: its changes to the "
                    "generalisation section apply")
     _run_arguments(p, cmd_generalisation)

@@ -579,10 +579,13 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     assert controllers.first_action_right.all() and controllers.achieved.all()
     walks = controllers[controllers.operator.str.startswith(("GoTo", "Move")) & (controllers.fail_prob == 0)]
     assert len(walks) and (walks.steps == walks.optimal_steps).all() and (walks.right_actions == walks.steps).all()
-    # one split alone (`--splits drawn`: a user's maps without the rest) has the episodes it has among all
+    # one split and method alone (`--splits drawn --methods gru`: a user's maps without the rest) have the
+    # episodes they have among all, beside the reference's
     alone = stages.evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "alone", Compute(workers=1),
-                                   progress=False, splits=["drawn"])
-    assert alone.equals(table[table.split == "drawn"].reset_index(drop=True))
+                                   progress=False, splits=["drawn"], methods=["gru"])
+    assert alone.equals(table[(table.split == "drawn") & table.method.isin(["gru", "symbolic"])].reset_index(drop=True))
+    with pytest.raises(ValueError, match=r"^--methods: options not learned here \(the experiment's: hnsdt, gru, dqn\)$"):
+        stages.evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "none", methods=["options"])
     (tmp_path / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     out = hnsdt_cli("generalisation", "evaluate", "--models", tmp_path / "models", "--splits", "drawn", "nope",
                     "--out", "res", cwd=tmp_path)

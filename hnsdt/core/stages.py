@@ -128,10 +128,11 @@ def train_unseen(params: Params, method: str, dataset: Path, out: Path, curves: 
 
 
 def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progress: bool = True,
-                    splits: Sequence[str] | None = None):
+                    splits: Sequence[str] | None = None, methods: Sequence[str] | None = None):
     """Stage `evaluate_generalisation`: every method × its seeds on every evaluated layout (training, held-out,
-    MiniGrid, drawn), the symbolic baseline as the reference, beside the exact optimum; ``splits`` names the
-    splits to evaluate (default: every one)."""
+    MiniGrid, drawn), the symbolic baseline as the reference, beside the exact optimum; ``splits`` and ``methods``
+    name the splits and learned methods to evaluate (default: every one; each episode is the one it is in the
+    whole evaluation)."""
     from hnsdt import generalisation as gen
     from hnsdt.core.config import eval_epsilon, layout_executor
     from hnsdt.core.methods import REFERENCE
@@ -145,11 +146,14 @@ def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progr
         unknown = [s for s in splits if s not in named]
         if unknown:
             raise ValueError(f"--splits: no split {', '.join(unknown)} here (the experiment's: {', '.join(named)})")
+    unknown = [m for m in methods or [] if m not in g.learned]
+    if unknown:
+        raise ValueError(f"--methods: {', '.join(unknown)} not learned here (the experiment's: {', '.join(g.learned)})")
     gen.check_sources(sources, max(fps))
-    methods = [*g.learned, REFERENCE]
+    methods = [*(m for m in g.learned if not methods or m in methods), REFERENCE]
     table = evaluate_layouts({m: g.seeds_of(m) for m in methods}, sources, fps, g.episodes,
                              {m: layout_executor(params, m) for m in methods},  # (generalisation.operators)
-                             {m: eval_epsilon(params, m) for m in g.learned}, models, out,
+                             {m: eval_epsilon(params, m) for m in methods}, models, out,
                              compute or compute_settings(params), progress, splits or None)
     print(f"wrote {out}/episodes.csv ({len(table)} episodes), summary.csv, segments.csv, layouts.csv")
     return table
