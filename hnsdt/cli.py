@@ -256,6 +256,8 @@ def cmd_generalisation(args) -> None:
     if (args.splits or args.methods) and args.action != "evaluate":
         raise ValueError("--splits and --methods are options of generalisation evaluate")
     params.need("generalisation")  # "missing key generalisation" before any work
+    run = Path("generalisation", *(("experiments", args.experiment) if args.experiment else ()))  # the pipeline's
+    args.models, args.results = args.models or run / "models", args.results or run / "results"   # outputs
     if args.action == "replay":
         if not args.episode:
             raise ValueError("generalisation replay needs --episode METHOD/seedK/LAYOUT/fpP/epI")
@@ -374,13 +376,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=LEARNED, help="train: the method")
     p.add_argument("--dataset", default="generalisation/dataset", help="train: the collected dataset")
     p.add_argument("--curves", help="train: training-curve folder")
-    p.add_argument("--models", default="generalisation/models", help="evaluate, replay: checkpoint root, one folder "
-                   "per method")
+    p.add_argument("--models", help="evaluate, replay: checkpoint root, one folder per method (default: the "
+                   "pipeline's, generalisation/models, or generalisation/experiments/NAME/models with --experiment)")
     p.add_argument("--episode", help="replay: an evaluated episode, METHOD/seedK/LAYOUT/fpP/epI of the columns of "
                    "episodes.csv (e.g. hnsdt/seed0/layouts/drawn/spiral_9x9.txt/fp0.1/ep3), made again from its "
                    "checkpoint and seeds, checked against its row and recorded (.rrd for rerun, .mcap for Foxglove)")
-    p.add_argument("--results", default="generalisation/results", help="replay: the evaluation's results folder "
-                   "(with --drawn: where `generalisation evaluate --drawn` wrote)")
+    p.add_argument("--results", help="replay: the evaluation's results folder (default: the pipeline's, as for "
+                   "--models; with --drawn: where `generalisation evaluate --drawn` wrote)")
     p.add_argument("--open", action="store_true", help="replay: start the rerun viewer on the recording")
     p.add_argument("--drawn", help="evaluate, replay: a folder of layout files (*.txt, maps of any shape with the family's "
                    "keys and doors), the split `drawn` in place of generalisation.drawn's folder")
