@@ -190,30 +190,16 @@ def cmd_replay(args) -> None:
 
 
 def _record_again(args, row, table_path: Path) -> Path:
-    """An episode `evaluate` did not record (``logs.episodes_per_cell``), made again from its checkpoint and
-    seeds as `evaluate` ran it, checked against its row, and written to ``--out`` (default: its id as a file name
-    here, outside every pipeline output)."""
+    """An episode `evaluate` did not record (``logs.episodes_per_cell``), made again and checked against its row
+    (:func:`hnsdt.core.stages.replay_evaluated`), written to ``--out`` (default: its id as a file name here,
+    outside every pipeline output)."""
     from hnsdt.core import stages
-    from hnsdt.core.config import compute_settings, env_spec, evaluate_settings, executor_config, load_params
-    from hnsdt.core.methods import ARMS
-    from hnsdt.evaluation.evaluate import Cell, rerun_episode
+    from hnsdt.core.config import compute_settings, load_params
 
     params = load_params(args.params)
-    settings = evaluate_settings(params)
-    if row["env"] not in settings.envs:
-        raise ValueError(f"{row['episode_id']}: env {row['env']} is not in train.envs of {args.params}")
     print(f"not recorded: running {row['method']} on {row['env']} with seed {row['seed']} again, as `evaluate` ran "
-          f"it ({len(settings.fail_probs)} x {settings.episodes} episodes)", flush=True)
-    outcome, files = rerun_episode(settings, {e: env_spec(params, e) for e in settings.envs},
-                                   {arm: executor_config(params, arm) for arm in ARMS}, args.models,
-                                   Cell(row["method"], row["env"], float(row["fail_prob"]), int(row["seed"])),
-                                   int(row["episode"]), compute_settings(params).threads,
-                                   stages._provenance(params))
-    listed = {"success": bool(row["success"]), "steps": int(row["steps"]), "reward": float(row["reward"]),
-              "replans": int(row["replans"])}
-    if outcome != listed:
-        raise ValueError(f"{row['episode_id']} ran again to {outcome}, not to {listed} as in {table_path}: the models, "
-                         "params or code changed since that evaluation (`dvc status` says which)")
+          "it", flush=True)
+    files = stages.replay_evaluated(params, Path(args.models), row, table_path, compute_settings(params).threads)
     return _write_recording(files, Path(args.out or row["episode_id"].replace("/", "-") + ".rrd"))
 
 
@@ -256,8 +242,8 @@ def cmd_generalisation(args) -> None:
     if (args.splits or args.methods) and args.action != "evaluate":
         raise ValueError("--splits and --methods are options of generalisation evaluate")
     params.need("generalisation")  # "missing key generalisation" before any work
-    run = Path("generalisation", *(("experiments", args.experiment) if args.experiment else ()))  # the pipeline's
-    args.models, args.results = args.models or run / "models", args.results or run / "results"   # outputs
+    ran = Path("generalisation", *(("experiments", args.experiment) if args.experiment else ()))  # the pipeline's
+    args.models, args.results = args.models or ran / "models", args.results or ran / "results"   # outputs
     if args.action == "replay":
         if not args.episode:
             raise ValueError("generalisation replay needs --episode METHOD/seedK/LAYOUT/fpP/epI")

@@ -148,6 +148,14 @@ def test_replay_points_to_an_evaluated_episode(repo_copy, tmp_path):
     again = hnsdt_cli("replay", "hnsdt/keydoor/fp0.2/seed0/ep3", "--out", tmp_path / "ep3.rrd", cwd=repo_copy)
     assert again.returncode == 0 and "the same steps as evaluated" in again.stdout, again.stderr
     assert (tmp_path / "ep3.rrd").stat().st_size and (tmp_path / "ep3.mcap").stat().st_size
+    (tmp_path / "changed").mkdir()  # ... and one whose row says otherwise is one error line, and no file
+    table = pd.read_csv(repo_copy / "results/episodes.csv", keep_default_na=False)
+    table.loc[table.episode_id == "hnsdt/keydoor/fp0.2/seed0/ep3", "steps"] += 1
+    table.to_csv(tmp_path / "changed/episodes.csv", index=False)
+    wrong = hnsdt_cli("replay", "hnsdt/keydoor/fp0.2/seed0/ep3", "--results", tmp_path / "changed", "--out",
+                      tmp_path / "wrong.rrd", cwd=repo_copy)
+    assert wrong.returncode == 2 and "changed since that evaluation" in wrong.stderr.splitlines()[-1]
+    assert not list(tmp_path.glob("wrong*"))
     cell = hnsdt_cli("replay", "*/keydoor/fp0.2/seed0/ep0", cwd=repo_copy)  # every method's episode of one cell
     assert cell.returncode == 0, cell.stderr
     opened = cell.stdout.splitlines()[-1]

@@ -187,12 +187,36 @@ def replay_unseen(params: Params, models: Path, results: Path, episode_id: str, 
                                           eval_epsilon(params, row["method"]), row["layout"],
                                           float(row["fail_prob"]), int(row["episode"]), threads,
                                           _provenance(params))
-    listed = {"success": bool(row["success"]), "steps": int(row["steps"]), "reward": float(row["reward"])}
     outcome["reward"] = float(f"{outcome['reward']:.6g}")  # (as episodes.csv writes it)
+    _check_outcome(episode_id, outcome, row, table_path)
+    return row, files
+
+
+def replay_evaluated(params: Params, models: Path, row, table_path: Path, threads: int = 1) -> dict:
+    """An evaluated episode of the paper protocol (``row`` of ``table_path``, its episodes.csv) made again
+    (:func:`hnsdt.evaluation.evaluate.rerun_episode`), checked against its row; its .rrd and .mcap bytes."""
+    from hnsdt.core.config import env_spec, evaluate_settings, executor_config
+    from hnsdt.core.methods import ARMS
+    from hnsdt.evaluation.evaluate import Cell, rerun_episode
+
+    settings = evaluate_settings(params)
+    if row["env"] not in settings.envs:
+        raise ValueError(f"{row['episode_id']}: env {row['env']} is not in train.envs of the params")
+    outcome, files = rerun_episode(settings, {e: env_spec(params, e) for e in settings.envs},
+                                   {arm: executor_config(params, arm) for arm in ARMS}, models,
+                                   Cell(row["method"], row["env"], float(row["fail_prob"]), int(row["seed"])),
+                                   int(row["episode"]), threads, _provenance(params))
+    _check_outcome(row["episode_id"], outcome, row, table_path)
+    return files
+
+
+def _check_outcome(episode_id: str, outcome: dict, row, table_path: Path) -> None:
+    """An episode made again must end as its row of the evaluation says."""
+    listed = {key: type(value)(row[key]) for key, value in outcome.items()}
     if outcome != listed:
         raise ValueError(f"{episode_id} ran again to {outcome}, not to {listed} as in {table_path}: the models, "
-                         "params, maps or code changed since that evaluation")
-    return row, files
+                         "params, maps or code changed since that evaluation (`dvc status` says which, for the "
+                         "pipeline's own)")
 
 
 def run_unseen_experiment(params: Params, out: Path, compute=None, progress: bool = True):
