@@ -370,8 +370,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--results", help="replay: the evaluation's results folder (default: the pipeline's, as for "
                    "--models; with --drawn: where `generalisation evaluate --drawn` wrote)")
     p.add_argument("--open", action="store_true", help="replay: start the rerun viewer on the recording")
-    p.add_argument("--drawn", help="evaluate, replay: a folder of layout files (*.txt, maps of any shape with the family's "
-                   "keys and doors), the split `drawn` in place of generalisation.drawn's folder")
+    p.add_argument("--drawn", help="evaluate, replay: a folder of layout files (*.txt, maps of any shape with the "
+                   "family's keys and doors), the split `drawn` in place of generalisation.drawn's folder")
     p.add_argument("--drawn-max-steps", type=int, default=250, help="evaluate, replay: the episode step limit on the "
                    "--drawn maps (default: 250)")
     p.add_argument("--splits", nargs="+", metavar="SPLIT", help="evaluate: only these splits (train, heldout, "

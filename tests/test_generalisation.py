@@ -584,7 +584,8 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     alone = stages.evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "alone", Compute(workers=1),
                                    progress=False, splits=["drawn"], methods=["gru"])
     assert alone.equals(table[(table.split == "drawn") & table.method.isin(["gru", "symbolic"])].reset_index(drop=True))
-    with pytest.raises(ValueError, match=r"^--methods: options not learned here \(the experiment's: hnsdt, gru, dqn\)$"):
+    with pytest.raises(ValueError, match=r"^--methods: options not learned here \(the experiment's: hnsdt, gru, "
+                                         r"dqn\)$"):
         stages.evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "none", methods=["options"])
     (tmp_path / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     out = hnsdt_cli("generalisation", "evaluate", "--models", tmp_path / "models", "--splits", "drawn", "nope",

@@ -532,7 +532,8 @@ def evaluate_layouts(seeds: dict[str, list[int]], sources: tuple, fail_probs: tu
 
     tasks = [EvalTask(method, seed, executors[method], *load_model(Path(models_root) / method / f"seed{seed}", method,
                                                                    view=True),
-                      epsilons.get(method, 0.0), layout_batches(seed, sources, fail_probs, episodes, splits), layout_rows)
+                      epsilons.get(method, 0.0), layout_batches(seed, sources, fail_probs, episodes, splits),
+                      layout_rows)
              for method, method_seeds in seeds.items() for seed in method_seeds]
     results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
     sources = tuple(s for s in sources if splits is None or s.split in splits)
