@@ -163,25 +163,31 @@ def cmd_replay(args) -> None:
     if rows.empty and any(c in pattern for c in "*?["):  # several episodes, to compare side by side
         import fnmatch
 
-        rows = table[[fnmatch.fnmatchcase(i, pattern) and bool(r) for i, r in zip(table.episode_id, table.rrd)]]
+        rows = table[[fnmatch.fnmatchcase(i, pattern) for i in table.episode_id]]
         if rows.empty:
-            raise ValueError(f"no recorded episode matches {pattern!r} in {table_path} (ids look like "
+            raise ValueError(f"no episode matches {pattern!r} in {table_path} (ids look like "
                              f"{table.episode_id.iloc[0]!r})")
+        again = int((rows.rrd == "").sum())
+        if again > MAX_MADE_AGAIN:
+            raise ValueError(f"{pattern!r} matches {len(rows)} episodes, {again} of them not recorded: at most "
+                             f"{MAX_MADE_AGAIN} are made again at once (name one cell's episode, e.g. "
+                             "'*/keydoor/fp0.1/seed3/ep5')")
     elif rows.empty:
         raise ValueError(f"no episode {pattern!r} in {table_path} (ids look like {table.episode_id.iloc[0]!r}; a "
                          "pattern such as '*/keydoor/fp0.1/seed0/ep0' selects several)")
     for row in rows.itertuples():
         print(f"{row.episode_id}: success={row.success}, steps={row.steps}, reward={row.reward}, "
               f"replans={row.replans}")
-    if (rows.rrd == "").any():  # (one episode: a pattern selects recorded ones)
-        rrd = _record_again(args, rows.iloc[0], table_path)
-        if args.open:
-            _open_in_rerun([rrd])
-        return
     base = Path(args.results).parent
-    rrds = [base / r for r in rows.rrd]
-    for r, m in zip(rows.rrd, rows.mcap):
-        print(f"  {base / r}\n  {base / m}")
+    rrds = []
+    for _, row in rows.iterrows():
+        if row["rrd"]:
+            rrds.append(base / row["rrd"])
+            print(f"  {rrds[-1]}\n  {base / row['mcap']}")
+        else:  # made again: to --out (a file for one episode, a folder for several), by default here
+            name = row["episode_id"].replace("/", "-") + ".rrd"
+            out = Path(args.out or name) if len(rows) == 1 else Path(args.out or ".") / name
+            rrds.append(_record_again(args, row, table_path, out))
     layout = base / "recordings" / "foxglove_layout.json"
     print(f"open with: rerun {' '.join(map(str, rrds))}   (or load the .mcap in Foxglove"
           + (f", with the layout {layout})" if layout.is_file() else ")"))
@@ -189,18 +195,20 @@ def cmd_replay(args) -> None:
         _open_in_rerun(rrds)
 
 
-def _record_again(args, row, table_path: Path) -> Path:
+MAX_MADE_AGAIN = 20  # episodes one `hnsdt replay` makes again (each a run of its method x env x seed)
+
+
+def _record_again(args, row, table_path: Path, out: Path) -> Path:
     """An episode `evaluate` did not record (``logs.episodes_per_cell``), made again and checked against its row
-    (:func:`hnsdt.core.stages.replay_evaluated`), written to ``--out`` (default: its id as a file name here,
-    outside every pipeline output)."""
+    (:func:`hnsdt.core.stages.replay_evaluated`), written to ``out`` (outside every pipeline output)."""
     from hnsdt.core import stages
     from hnsdt.core.config import compute_settings, load_params
 
     params = load_params(args.params)
-    print(f"not recorded: running {row['method']} on {row['env']} with seed {row['seed']} again, as `evaluate` ran "
-          "it", flush=True)
+    print(f"  not recorded: running {row['method']} on {row['env']} with seed {row['seed']} again, as `evaluate` "
+          "ran it", flush=True)
     files = stages.replay_evaluated(params, Path(args.models), row, table_path, compute_settings(params).threads)
-    return _write_recording(files, Path(args.out or row["episode_id"].replace("/", "-") + ".rrd"))
+    return _write_recording(files, out)
 
 
 def _write_recording(files: dict[str, bytes], out: Path) -> Path:
@@ -210,8 +218,7 @@ def _write_recording(files: dict[str, bytes], out: Path) -> Path:
     for path, data in ((out, files[".rrd"]), (out.with_suffix(".mcap"), files[".mcap"])):
         with atomic_file(path) as tmp:
             tmp.write_bytes(data)
-    print(f"  {out}\n  {out.with_suffix('.mcap')}\nthe same steps as evaluated; open with: rerun {out}   (or load "
-          f"{out.with_suffix('.mcap')} in Foxglove)")
+    print(f"  {out}\n  {out.with_suffix('.mcap')}\n  (the same steps as evaluated)")
     return out
 
 
@@ -253,6 +260,7 @@ def cmd_generalisation(args) -> None:
               f"{row['optimal_steps']:g}), reward={row['reward']}")
         name = f"{row['method']}-seed{row['seed']}-{Path(row['layout']).stem}-fp{row['fail_prob']:g}-ep{row['episode']}"
         rrd = _write_recording(files, Path(args.out or name + ".rrd"))
+        print(f"open with: rerun {rrd}   (or load {rrd.with_suffix('.mcap')} in Foxglove)")
         if args.open:
             _open_in_rerun([rrd])
         return

@@ -146,8 +146,11 @@ def test_replay_points_to_an_evaluated_episode(repo_copy, tmp_path):
     assert "recordings/hnsdt/keydoor/fp0.2/seed0/ep0.rrd" in out.stdout and ".mcap" in out.stdout
     # an episode that was not recorded is made again from its checkpoint and seeds and checked against its row
     again = hnsdt_cli("replay", "hnsdt/keydoor/fp0.2/seed0/ep3", "--out", tmp_path / "ep3.rrd", cwd=repo_copy)
-    assert again.returncode == 0 and "the same steps as evaluated" in again.stdout, again.stderr
+    assert again.returncode == 0 and "(the same steps as evaluated)" in again.stdout, again.stderr
     assert (tmp_path / "ep3.rrd").stat().st_size and (tmp_path / "ep3.mcap").stat().st_size
+    cell = hnsdt_cli("replay", "*/keydoor/fp0.2/seed0/ep1", "--out", tmp_path / "cell", cwd=repo_copy)  # side by side
+    assert cell.returncode == 0 and cell.stdout.count("(the same steps as evaluated)") == len(METHODS), cell.stderr
+    assert len(list((tmp_path / "cell").glob("*.mcap"))) == len(METHODS)
     (tmp_path / "changed").mkdir()  # ... and one whose row says otherwise is one error line, and no file
     table = pd.read_csv(repo_copy / "results/episodes.csv", keep_default_na=False)
     table.loc[table.episode_id == "hnsdt/keydoor/fp0.2/seed0/ep3", "steps"] += 1
