@@ -85,7 +85,7 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     assert set(unseen.method) == set(UNSEEN) | {"symbolic"}
     assert set(unseen.split) == {"train", "heldout", "minigrid", "drawn"}
     assert len(unseen) == (len(UNSEEN) + 1) * (3 + drawn) * 2 * 2  # methods x layouts x fail_probs x episodes
-    assert "hand-drawn maps: 6 (5–16 × 9–16 cells)" in report and "against the target on maps it never saw" in report
+    assert "hand-drawn maps: 11 (3–16 × 4–16 cells)" in report and "against the target on maps it never saw" in report
     assert "Per hand-drawn map" in report and "| `spiral_9x9` |" in report
     segments = pd.read_csv(repo_copy / "generalisation/results/segments.csv")  # where HNSDT's steps go, and why
     assert set(segments.method) == {"hnsdt", "symbolic"} and "| hand-drawn maps | Move |" in report
