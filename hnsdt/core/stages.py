@@ -150,10 +150,10 @@ def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progr
     if unknown:
         raise ValueError(f"--methods: {', '.join(unknown)} not learned here (the experiment's: {', '.join(g.learned)})")
     gen.check_sources(sources, max(fps))
-    methods = [*(m for m in g.learned if not methods or m in methods), REFERENCE]
-    table = evaluate_layouts({m: g.seeds_of(m) for m in methods}, sources, fps, g.episodes,
-                             {m: layout_executor(params, m) for m in methods},  # (generalisation.operators)
-                             {m: eval_epsilon(params, m) for m in methods}, models, out,
+    evaluated = [*(m for m in g.learned if not methods or m in methods), REFERENCE]
+    table = evaluate_layouts({m: g.seeds_of(m) for m in evaluated}, sources, fps, g.episodes,
+                             {m: layout_executor(params, m) for m in evaluated},  # (generalisation.operators)
+                             {m: eval_epsilon(params, m) for m in evaluated}, models, out,
                              compute or compute_settings(params), progress, splits or None)
     print(f"wrote {out}/episodes.csv ({len(table)} episodes), summary.csv, segments.csv, layouts.csv")
     return table

@@ -453,14 +453,20 @@ def rerun_episode(settings, envs: dict, executors: dict[str, ExecutorConfig], mo
     threads), so that the episode is the evaluation's to the bit; ``(its outcome, its .rrd and .mcap bytes)``."""
     from functools import partial
 
-    from hnsdt.core.compute import Compute, run_tasks
-
     if cell.fail_prob not in settings.fail_probs or not 0 <= episode < settings.episodes:
         raise ValueError(f"{cell.episode_id(episode)}: not an episode of this evaluation (evaluate.fail_probs "
                          f"{list(settings.fail_probs)}, evaluate.episodes {settings.episodes})")
     rows = partial(episode_recording, settings.fail_probs.index(cell.fail_prob), episode)
     task = cell_task(settings, envs, executors, models_root, cell.method, cell.env, cell.seed, rows,
                      provenance=provenance)
+    return _run_here(task, threads)
+
+
+def _run_here(task: EvalTask, threads: int) -> tuple[dict, dict]:
+    """A re-run's one task in this process, through the pickles and thread count a worker's runs have: the
+    ``(outcome, files)`` its ``rows`` made of its one batch."""
+    from hnsdt.core.compute import Compute, run_tasks
+
     ((outcome, files),), = run_tasks(evaluate_run, [task], Compute(workers=1, threads=threads), progress=False)
     return outcome, files
 
@@ -564,7 +570,7 @@ def layout_episode_recording(layout: str, fail_prob: float, episode: int, task: 
     episode's outcome, as ``episodes.csv`` has it, and its recordings."""
     from hnsdt.logs import record_from_episode, recording_files
 
-    sources, per_fail_prob = batch.key
+    sources = batch.key[0]
     k = [s.name for s in sources].index(layout)
     run = equal_runs(batch.copies, len(sources), "layouts")[k]
     first = next(i for i in range(run.start, run.stop) if batch.fail_prob[i] == fail_prob)
@@ -586,8 +592,6 @@ def rerun_layout_episode(sources: tuple, fail_probs: tuple[float, ...], episodes
     the episode is the evaluation's to the bit; ``(its outcome, its .rrd and .mcap bytes)``."""
     from functools import partial
 
-    from hnsdt.core.compute import Compute, run_tasks
-
     src = next((s for s in sources if s.name == layout), None)
     episode_id = layout_episode_id(method, seed, layout, fail_prob, episode)
     if src is None:
@@ -600,8 +604,7 @@ def rerun_layout_episode(sources: tuple, fail_probs: tuple[float, ...], episodes
     model, meta = load_model(Path(models_root) / method / f"seed{seed}", method, view=True)
     task = EvalTask(method, seed, executor, model, meta, epsilon, (batch,),
                     partial(layout_episode_recording, layout, fail_prob, episode), 0, provenance)
-    ((outcome, files),), = run_tasks(evaluate_run, [task], Compute(workers=1, threads=threads), progress=False)
-    return outcome, files
+    return _run_here(task, threads)
 
 
 def layout_summary(table: pd.DataFrame) -> pd.DataFrame:
