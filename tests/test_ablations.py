@@ -8,8 +8,8 @@ from hnsdt.evaluation import ablations
 
 
 def _variant(name, ingredient, maps=40, encoder="5×5 flattened", relabel=0, success=0.5, ratio=1.5,
-             methods=("hnsdt", "pure_dt", "symbolic")):
-    rows = [dict(variant=name, ingredient=ingredient, family="keydoor_maze", train_layouts=maps, episodes_per_map=32,
+             methods=("hnsdt", "pure_dt", "symbolic"), family="keydoor_maze"):
+    rows = [dict(variant=name, ingredient=ingredient, family=family, train_layouts=maps, episodes_per_map=32,
                  encoder=encoder, relabel_rounds=relabel, seeds="0 1", method=m, split=s, success=success,
                  success_std=0.1, steps_ratio=ratio, validation_steps=30.0 if m != "symbolic" else float("nan"),
                  command="python benchmarks/generalisation.py", revision="abc", params_digest="p",
@@ -50,6 +50,19 @@ def test_the_scaling_figure_takes_the_variants_that_change_only_the_maps(tmp_pat
     only_default = rows[rows.variant != "400 maps"]
     assert not ablations.scaling_figure(only_default, tmp_path / "none.png")  # one map count: no curve
     assert not (tmp_path / "none.png").exists()
+
+
+def test_the_scaling_figure_follows_each_family_from_its_own_first_row(tmp_path):
+    case2 = [_variant("multikeydoor", "family", family="multikeydoor"),
+             _variant("multikeydoor, 400 maps", "maps", maps=400, family="multikeydoor"),
+             _variant("multikeydoor, conv", "encoder", encoder="5×5 + 2 conv", family="multikeydoor")]
+    rows = pd.concat([_variant("default", "reference"), *case2])
+    points = ablations.scaling_points(rows)
+    assert sorted(set(points.variant)) == ["default", "multikeydoor", "multikeydoor, 400 maps"]
+    assert set(points[points.variant == "multikeydoor, 400 maps"].family) == {"multikeydoor"}
+    assert ablations.scaling_figure(rows, tmp_path / "scaling.png")  # two map counts in one family: a curve
+    one_count = rows[rows.variant != "multikeydoor, 400 maps"]  # two families, one map count each: none
+    assert not ablations.scaling_figure(one_count, tmp_path / "none.png") and not (tmp_path / "none.png").exists()
 
 
 def test_the_ablation_table_shows_each_learned_method_of_each_variant(tmp_path):

@@ -64,13 +64,15 @@ def record(path: str | Path, rows: pd.DataFrame) -> None:
 
 
 def scaling_points(rows: pd.DataFrame) -> pd.DataFrame:
-    """The variants that differ from the reference in their maps alone: per method and split, the number of
-    training maps (and episodes per map) against success and steps / optimum."""
+    """The variants that differ from their family's first row in their maps alone: per family, method and split,
+    the number of training maps (and episodes per map) against success and steps / optimum. A family's first row
+    is the reference (its family) or a variant that changes only the family; the reference's encoder, no
+    relabelled rounds."""
     ref = rows[rows.ingredient == "reference"]
     if ref.empty:
         return rows.iloc[:0]
-    same = (rows.encoder == ref.encoder.iloc[0]) & (rows.family == ref.family.iloc[0]) & (rows.relabel_rounds == 0)
-    return rows[rows.ingredient.isin(["reference", "maps"]) & same]
+    same = (rows.encoder == ref.encoder.iloc[0]) & (rows.relabel_rounds == 0)
+    return rows[rows.ingredient.isin(["reference", "family", "maps"]) & same]
 
 
 SPLITS = {"heldout": "held-out", "minigrid": "MiniGrid 8×8", "minigrid_16x16": "MiniGrid 16×16", "drawn": "hand-drawn"}
@@ -113,18 +115,23 @@ def ablation_table(rows: pd.DataFrame) -> str:
 
 def scaling_figure(rows: pd.DataFrame, path: Path) -> bool:
     """Held-out and hand-drawn steps / optimum (left) and success (right) against the number of training maps,
-    one line per method and split through the variant with the most episodes per map at each count (fewer
-    episodes per map: hollow markers beside it; each point labelled with its episodes per map). False (no
-    figure) when fewer than two map counts were measured."""
+    one line per family, method and split through the variant with the most episodes per map at each count
+    (fewer episodes per map: hollow markers beside it; each point labelled with its episodes per map; the
+    reference's family solid and dashed, another family dash-dotted, with its name). False (no figure) when no
+    family was measured at two map counts."""
     points = scaling_points(rows)
-    if points.train_layouts.nunique() < 2:
+    if points.groupby("family").train_layouts.nunique().max() < 2:
         return False
+    reference = points[points.ingredient == "reference"].family.iloc[0]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    for (method, split), d in points[points.split.isin(["heldout", "drawn"])].groupby(["method", "split"], sort=False):
+    for (family, method, split), d in points[points.split.isin(["heldout", "drawn"])].groupby(
+            ["family", "method", "split"], sort=False):
         d = d.sort_values(["train_layouts", "episodes_per_map"], kind="stable")
         most = d.groupby("train_layouts").episodes_per_map.transform("max") == d.episodes_per_map
         style = {"marker": "o" if split == "heldout" else "s", "linestyle": "-" if split == "heldout" else "--"}
         label = f"{_label(method)}, {SPLITS[split]}"
+        if family != reference:
+            style, label = {"marker": "^", "linestyle": "-."}, f"{label} ({family})"
         for ax, column in zip(axes, ("steps_ratio", "success")):
             line, = ax.plot(d.train_layouts[most], d[column][most], label=label, **style)
             ax.plot(d.train_layouts[~most], d[column][~most], marker=style["marker"], linestyle="none",
