@@ -63,6 +63,8 @@ def test_the_scaling_figure_follows_each_family_from_its_own_first_row(tmp_path)
     assert ablations.scaling_figure(rows, tmp_path / "scaling.png")  # two map counts in one family: a curve
     one_count = rows[rows.variant != "multikeydoor, 400 maps"]  # two families, one map count each: none
     assert not ablations.scaling_figure(one_count, tmp_path / "none.png") and not (tmp_path / "none.png").exists()
+    no_reference = pd.concat(case2)  # a file of variants without the reference row: no figure, no error
+    assert not ablations.scaling_figure(no_reference, tmp_path / "none.png") and not (tmp_path / "none.png").exists()
 
 
 def test_the_ablation_table_shows_each_learned_method_of_each_variant(tmp_path):

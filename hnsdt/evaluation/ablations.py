@@ -120,7 +120,7 @@ def scaling_figure(rows: pd.DataFrame, path: Path) -> bool:
     reference's family solid and dashed, another family dash-dotted, with its name). False (no figure) when no
     family was measured at two map counts."""
     points = scaling_points(rows)
-    if points.groupby("family").train_layouts.nunique().max() < 2:
+    if not (points.groupby("family").train_layouts.nunique() >= 2).any():  # (no points at all: no reference)
         return False
     reference = points[points.ingredient == "reference"].family.iloc[0]
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
