@@ -60,6 +60,8 @@ def test_the_scaling_figure_follows_each_family_from_its_own_first_row(tmp_path)
     points = ablations.scaling_points(rows)
     assert sorted(set(points.variant)) == ["default", "multikeydoor", "multikeydoor, 400 maps"]
     assert set(points[points.variant == "multikeydoor, 400 maps"].family) == {"multikeydoor"}
+    orphan = _variant("obstacles, 400 maps", "maps", maps=400, family="keydoor_obstacles")  # no 40-map row of its own
+    assert "obstacles, 400 maps" not in set(ablations.scaling_points(pd.concat([rows, orphan])).variant)
     assert ablations.scaling_figure(rows, tmp_path / "scaling.png")  # two map counts in one family: a curve
     one_count = rows[rows.variant != "multikeydoor, 400 maps"]  # two families, one map count each: none
     assert not ablations.scaling_figure(one_count, tmp_path / "none.png") and not (tmp_path / "none.png").exists()

@@ -71,8 +71,9 @@ def scaling_points(rows: pd.DataFrame) -> pd.DataFrame:
     ref = rows[rows.ingredient == "reference"]
     if ref.empty:
         return rows.iloc[:0]
-    same = (rows.encoder == ref.encoder.iloc[0]) & (rows.relabel_rounds == 0)
-    return rows[rows.ingredient.isin(["reference", "family", "maps"]) & same]
+    first = rows.ingredient.isin(["reference", "family"])
+    same = (rows.encoder == ref.encoder.iloc[0]) & (rows.relabel_rounds == 0) & rows.family.isin(rows.family[first])
+    return rows[(first | (rows.ingredient == "maps")) & same]
 
 
 SPLITS = {"heldout": "held-out", "minigrid": "MiniGrid 8×8", "minigrid_16x16": "MiniGrid 16×16", "drawn": "hand-drawn"}
