@@ -46,24 +46,38 @@ from hnsdt.envs import load_layout  # noqa: E402
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-AFTER_THE_PIPELINE_RUN = {"test_pipeline_resume.py", "test_pipeline_use.py"}  # files that copy the shared tiny pipeline run (below)
-# the end-to-end files whose tests build on each other's repo run whole on one worker, in order: the worker that
-# runs the tiny pipeline (test_pipeline.py) resumes it too. test_pipeline_use.py's tests do not depend on each
-# other's changes (each worker copies the run for itself): they go to whichever worker is free, so that neither
-# worker ends alone on both
-END_TO_END = {"test_pipeline.py": "tiny pipeline", "test_pipeline_resume.py": "tiny pipeline"}
+TINY_PIPELINE = "test_pipeline.py"  # runs the tiny pipeline's first `dvc repro` (its first test's fixture)
+AFTER_THE_PIPELINE_RUN = {"test_pipeline_resume.py", "test_pipeline_use.py"}  # files that copy that run (below)
+# test_pipeline.py's tests build on each other's repo: they run whole on one worker, in order. The other files
+# that need the run copy it for themselves (each test file its own copy): their tests go to whichever worker is
+# free once the run is there, so that neither worker ends alone on them
+END_TO_END = {TINY_PIPELINE: "tiny pipeline"}
+
+
+def _file(nodeid: str) -> str:
+    return os.path.basename(nodeid.split("::", 1)[0])
+
+
+def _first_run_done(shared) -> bool:
+    """Whether the tiny pipeline's shared first run has ended (tiny_repo.shared_first_run's record of it)."""
+    return (shared / "first-run.json").is_file()
 
 
 def pytest_xdist_make_scheduler(config, log):
     """How pytest-xdist hands out tests: one at a time to whichever worker is free (the fast tier splits evenly
-    over two workers), the end-to-end files as END_TO_END says (while one worker runs the tiny pipeline, the
-    other runs everything else). xdist's own `--dist loadgroup` would say this with marks, but with pytest 9 it
-    groups nothing (it renames tests through an attribute pytest no longer reads), so the scheduler is told here."""
+    over two workers), test_pipeline.py whole and first (while one worker runs the tiny pipeline, the other runs
+    everything else), and a test that copies that run only once it has ended and to a worker that holds no other
+    such test, as long as any other is left (it would wait for the run: 45 s of a worker's time at 16fb3b8; the
+    two longest back to back on one worker: a 64-s tail). xdist's own `--dist loadgroup` would say the grouping
+    with marks, but with pytest 9 it groups nothing (it renames tests through an attribute pytest no longer
+    reads), so the scheduler is told here."""
     from xdist.scheduler import LoadScopeScheduling
+
+    shared = config._tmp_path_factory.getbasetemp()  # (each worker's basetemp is a folder in it: pipeline_run)
 
     class OneTestOrEndToEndFiles(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
-            return END_TO_END.get(os.path.basename(nodeid.split("::", 1)[0]), nodeid)
+            return END_TO_END.get(_file(nodeid), nodeid)
 
         def _reschedule(self, node) -> None:
             # xdist tops a worker up once it has 2 tests or fewer left, so near the end a busy worker holds tests
@@ -76,15 +90,29 @@ def pytest_xdist_make_scheduler(config, log):
             elif self._pending_of(self.assigned_work[node]) <= 1:
                 self._assign_work_unit(node)
 
+        def _assign_work_unit(self, node) -> None:
+            # a test that copies the tiny pipeline's run waits for it to end, and a worker that already holds one
+            # (its next test is handed out while it runs one) would run two of the longest in a row: then the
+            # first test in the queue that does neither, if any is left
+            held = any(_file(scope) in AFTER_THE_PIPELINE_RUN and not all(unit.values())
+                       for scope, unit in self.assigned_work.get(node, {}).items())
+            if held or not _first_run_done(shared):
+                ready = next((s for s in self.workqueue if _file(s) not in AFTER_THE_PIPELINE_RUN), None)
+                if ready is not None:
+                    self.workqueue.move_to_end(ready, last=False)
+            super()._assign_work_unit(node)
+
     return OneTestOrEndToEndFiles(config, log)
 
 
 def pytest_collection_modifyitems(items):
     """The order the workers are handed tests in (pytest_xdist_make_scheduler above; `--no-loadscope-reorder`):
-    the longest first — the slow (end-to-end) tests, then the learning tests, then the files that copy
-    the tiny pipeline's run (by then the worker running test_pipeline.py has about finished it) — so that the
-    short ones fill the gaps at the end."""
+    the longest first — the tiny pipeline's run, the other slow (end-to-end) tests, then the learning tests,
+    then the files that copy the tiny pipeline's run (handed out once it has ended) — so that the short ones fill
+    the gaps at the end."""
     def rank(item) -> int:
+        if item.path.name == TINY_PIPELINE:
+            return -1
         if item.path.name in AFTER_THE_PIPELINE_RUN:
             return 2
         return 0 if item.get_closest_marker("slow") else 1 if item.get_closest_marker("learning") else 3
