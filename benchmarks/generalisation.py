@@ -16,13 +16,15 @@ HNSDT's own sub-goal; for the pure DT, the planner's first from that state), and
 plus those frames; `--relabel-rounds R` repeats it R times.
 `--record NAME --ingredient I` adds the run's table to benchmarks/results/generalisation.csv as the variant NAME
 (hnsdt.evaluation.ablations: the report's ablation table and scaling figure), with the command, revision and
-digests that made it.)
+digests that made it.) `--keep DIR` keeps the run's dataset, models and results (per fail_prob, episode and
+sub-goal segment: the stage's summary.csv, episodes.csv and segments.csv) in DIR, which must not exist.
 """
 
 import argparse
 import copy
 import hashlib
 import shlex
+import shutil
 import sys
 import tempfile
 import time
@@ -67,9 +69,12 @@ def main() -> None:
     ap.add_argument("--record", metavar="NAME", help="add the results to --results as the variant NAME")
     ap.add_argument("--ingredient", choices=ablations.INGREDIENTS, help="what --record's variant changes")
     ap.add_argument("--results", type=Path, default=Path("benchmarks/results/generalisation.csv"))
+    ap.add_argument("--keep", type=Path, metavar="DIR", help="keep the dataset, models and results in DIR (new)")
     args = ap.parse_args()
     if bool(args.record) != bool(args.ingredient):
         ap.error("--record and --ingredient go together")
+    if args.keep and args.keep.exists():
+        ap.error(f"--keep {args.keep} exists: name a new folder")
     raw = copy.deepcopy(load_params(args.params).raw)
     g = raw["generalisation"]
     if args.family:
@@ -122,11 +127,18 @@ def main() -> None:
         t0 = time.perf_counter()
         stages.evaluate_unseen(params, tmp / "models", tmp / "results", compute, progress=False)
         times["evaluate"] = time.perf_counter() - t0
-        table = generalisation_table(pd.read_csv(tmp / "results/summary.csv"))
+        summary = pd.read_csv(tmp / "results/summary.csv")
+        table = generalisation_table(summary)
         per_map = drawn_lines(pd.read_csv(tmp / "results/episodes.csv"))
         if args.record:
             rows = variant_rows(args, params, table, best, rounds, folder_digest(tmp / "dataset"), sum(times.values()))
             ablations.record(args.results, rows)
+        if args.keep:  # (copied whole, then renamed: no half-kept folder under the name asked for)
+            staging = args.keep.with_name(f".{args.keep.name}.partial")
+            shutil.rmtree(staging, ignore_errors=True)
+            for part in ("dataset", "models", "curves", "results"):
+                shutil.copytree(tmp / part, staging / part)
+            staging.rename(args.keep)
     print(f"\n{g['family']}: {g['train_layouts']} training layouts ({g['evaluated_train_layouts']} evaluated), "
           f"{g['heldout_layouts']} held-out, MiniGrid {[(m['id'], m['layouts']) for m in g['minigrid']]}; seeds "
           f"{g['seeds']}, {g['episodes']} episodes per layout and fail_prob, budgets {g.get('budgets', {})}\n")
@@ -134,6 +146,10 @@ def main() -> None:
     for r in table.itertuples():
         print(f"| {r.method} | {SPLIT_LABELS.get(r.split, r.split)} | {r.success:.3f} ± {r.success_std:.3f} | "
               f"{r.steps_ratio:.2f} |")
+    print("\nper fail_prob (success, steps / optimal; mean of seeds):")
+    for (method, split), rows in summary.groupby(["method", "split"], sort=False):
+        print(f"  {method} {SPLIT_LABELS.get(split, split)}: " + ", ".join(
+            f"{r.fail_prob:g} {r.success_mean:.3f} at {r.steps_ratio_mean:.2f}×" for r in rows.itertuples()))
     if per_map:
         print("\nper hand-drawn map (success):\n" + per_map)
     if validation:
@@ -143,6 +159,8 @@ def main() -> None:
     print("\n" + ", ".join(f"{k} {v:.0f} s" for k, v in times.items()) + f"; total {sum(times.values()):.0f} s")
     if args.record:
         print(f"recorded variant {args.record!r} ({args.ingredient}) in {args.results}")
+    if args.keep:
+        print(f"kept the dataset, models and results in {args.keep}")
 
 
 def kept_validation(models: Path, seeds: list[int]) -> dict[int, dict]:
