@@ -17,7 +17,9 @@ plus those frames; `--relabel-rounds R` repeats it R times.
 `--record NAME --ingredient I` adds the run's table to benchmarks/results/generalisation.csv as the variant NAME
 (hnsdt.evaluation.ablations: the report's ablation table and scaling figure), with the command, revision and
 digests that made it.) `--keep DIR` keeps the run's dataset, models and results (per fail_prob, episode and
-sub-goal segment: the stage's summary.csv, episodes.csv and segments.csv) in DIR, which must not exist.
+sub-goal segment: the stage's summary.csv, episodes.csv and segments.csv) and its params in DIR, which must not
+exist; any evaluated episode can then be made again and recorded: `hnsdt --params DIR/params.yaml generalisation
+replay --models DIR/models --results DIR/results --episode ID`.
 """
 
 import argparse
@@ -138,6 +140,7 @@ def main() -> None:
             shutil.rmtree(staging, ignore_errors=True)
             for part in ("dataset", "models", "curves", "results"):
                 shutil.copytree(tmp / part, staging / part)
+            (staging / "params.yaml").write_text(yaml.safe_dump(raw, sort_keys=False))  # (for `hnsdt --params`)
             staging.rename(args.keep)
     print(f"\n{g['family']}: {g['train_layouts']} training layouts ({g['evaluated_train_layouts']} evaluated), "
           f"{g['heldout_layouts']} held-out, MiniGrid {[(m['id'], m['layouts']) for m in g['minigrid']]}; seeds "
@@ -160,7 +163,7 @@ def main() -> None:
     if args.record:
         print(f"recorded variant {args.record!r} ({args.ingredient}) in {args.results}")
     if args.keep:
-        print(f"kept the dataset, models and results in {args.keep}")
+        print(f"kept the dataset, models, results and params in {args.keep}")
 
 
 def kept_validation(models: Path, seeds: list[int]) -> dict[int, dict]:
