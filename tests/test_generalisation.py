@@ -1108,3 +1108,33 @@ def test_the_validation_measure_acts_on_its_maps_side_by_side():
     assert [len(c.starts) for c in measure.courses] == [2, 2, 2]
     alone = [StepsToExit("symbolic", measure.executor, {}, (course,))(None) for course in measure.courses]
     assert len(set(alone)) > 1 and measure(None) == pytest.approx(np.mean(alone), rel=1e-12)
+
+
+def _benchmark(name: str):
+    """A module of benchmarks/ (not a package), loaded from its file."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, Path(__file__).resolve().parents[1] / f"benchmarks/{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_goto_legs_detour_is_its_shortest_path_beyond_the_manhattan_distance():
+    legs = _benchmark("goto_legs").legs(
+        load_layout(Path(__file__).resolve().parents[1] / "layouts/drawn/deadend_14x14.txt"), "cost")
+    assert [leg["operator"] for leg in legs] == ["GoTo(key a)", "PickKey(a)", "GoTo(door A)", "OpenDoor(A)",
+                                                "GoTo(exit)"]
+    key = legs[0]  # the key lies 9 cells from the start as the crow walks, behind a wall: 33 steps round it
+    assert (key["source"], key["target"], key["manhattan"], key["shortest"], key["detour"]) == ((0, 0), (7, 2), 9, 33, 24)
+    assert not legs[1]["goto"] and "detour" not in legs[1]
+
+
+def test_first_attempts_keep_each_episodes_segments_up_to_its_first_failure():
+    import pandas as pd
+
+    rows = [(0, 0, True), (0, 5, False), (0, 9, True), (1, 0, True), (1, 4, True)]  # (episode, start, achieved)
+    segments = pd.DataFrame([dict(seed=0, split="drawn", layout="m", fail_prob=0.0, episode=e, start=s, achieved=a)
+                             for e, s, a in rows]).iloc[::-1]  # (in any order)
+    kept = _benchmark("goto_legs").first_attempts(segments)
+    assert sorted(zip(kept.episode, kept.start, kept.leg)) == [(0, 0, 0), (0, 5, 1), (1, 0, 0), (1, 4, 1)]
