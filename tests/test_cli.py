@@ -4,10 +4,12 @@ import sys
 import pytest
 import yaml
 
-from conftest import REPO
+from conftest import REPO, hnsdt_cli
 
 
 def hnsdt(*args, cwd=REPO):
+    """The entry point itself, in a fresh process (the tests of what a command says run it in this one: hnsdt_cli,
+    without a second's imports each)."""
     return subprocess.run([sys.executable, "-m", "hnsdt.cli", *args], cwd=cwd, capture_output=True, text=True)
 
 
@@ -42,7 +44,8 @@ def test_bad_params_give_one_error_line_and_no_output(tmp_path, text, match):
     params = tmp_path / "params.yaml"
     params.write_text(text + "collect:\n  seed: 0\n  fail_probs: [0.1]\n  behaviours: []\n")
     out_dir = tmp_path / "out"
-    out = hnsdt("--params", str(params), "collect", "--env", "keydoor", "--out", str(out_dir))
+    run = hnsdt if (text, match) == BAD_PARAMS[0] else hnsdt_cli  # one through a real process's exit and stderr
+    out = run("--params", str(params), "collect", "--env", "keydoor", "--out", str(out_dir))
     assert out.returncode == 2
     lines = out.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("hnsdt: error:") and match in lines[0], out.stderr
@@ -54,10 +57,10 @@ def test_unknown_behaviour_policy(tmp_path):
     params_dict["collect"]["behaviours"][0]["policy"] = "teleport"  # built in code, not by editing the text
     params = tmp_path / "params.yaml"
     params.write_text(yaml.safe_dump(params_dict))
-    out = hnsdt("--params", str(params), "collect", "--env", "keydoor", "--out", str(tmp_path / "o"))
+    out = hnsdt_cli("--params", str(params), "collect", "--env", "keydoor", "--out", str(tmp_path / "o"))
     assert out.returncode == 2 and "collect.behaviours.0.policy: Input should be 'random' or 'noisy_planner'" in out.stderr
 
 
 def test_unknown_env_name():
-    out = hnsdt("plan", "--env", "nowhere")
+    out = hnsdt_cli("plan", "--env", "nowhere")
     assert out.returncode == 2 and "unknown env 'nowhere'" in out.stderr
