@@ -35,10 +35,11 @@ from hnsdt.models.optim import Adam
 from hnsdt.models.qnetwork import OptionCriticConfig
 from hnsdt.models.recurrent import RecurrentConfig, RecurrentPolicy
 
-def digest(model):
+def digest(*models):
     h = hashlib.sha256()
-    for v in model.state_dict().values():
-        h.update(v.detach().cpu().numpy().tobytes())
+    for model in models:
+        for v in model.state_dict().values():
+            h.update(v.detach().cpu().numpy().tobytes())
     return h.hexdigest()[:12]
 
 torch.manual_seed(0)
@@ -65,7 +66,7 @@ oc, _, _ = train_options(lay, 100, OptionCriticConfig(lay.n_flags, *lay.shape),
                          OptionsConfig(env_steps=6000, learning_starts=1000, seed=0), progress=False)
 oc_s = time.perf_counter() - t
 
-rnn_hash, rnn_steps = hashlib.sha256(), 0
+rnns, rnn_steps = [], 0
 t = time.perf_counter()
 for cell, layers, hidden, hierarchical in (("lstm", 3, 256, True), ("gru", 2, 128, False)):
     torch.manual_seed(0)
@@ -86,8 +87,7 @@ for cell, layers, hidden, hierarchical in (("lstm", 3, 256, True), ("gru", 2, 12
         loss.backward()
         opt.step()
         rnn_steps += 1
-    for v in rnn.state_dict().values():
-        rnn_hash.update(v.detach().cpu().numpy().tobytes())
+    rnns.append(rnn)
 rnn_ms = (time.perf_counter() - t) / rnn_steps * 1000
 
 def gmacs(product, n=300):  # one (100 x 128) . (128 x 512) product, one thread: a DT layer acting for 100 episodes
@@ -103,7 +103,7 @@ torch.set_num_threads(1)
 with torch.no_grad():
     torch_gmacs, ours_gmacs = gmacs(torch.nn.functional.linear), gmacs(linear)
 print(f"{torch.backends.cpu.get_cpu_capability():<7} {threads:>2}  {digest(dt)} {dt_ms:6.0f} ms/step"
-      f"  {digest(oc)} {oc_s:5.1f} s  {rnn_hash.hexdigest()[:12]} {rnn_ms:4.0f} ms/step  {torch_gmacs:5.1f} {ours_gmacs:5.1f}")
+      f"  {digest(oc)} {oc_s:5.1f} s  {digest(*rnns)} {rnn_ms:4.0f} ms/step  {torch_gmacs:5.1f} {ours_gmacs:5.1f}")
 """
 
 CONFIGS = [

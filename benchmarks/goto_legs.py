@@ -6,12 +6,11 @@ A leg counts the episodes that reached it along the planner's first plan (every 
 the first attempt, so that the leg starts where the plan says) and how many of them then achieved it at once.
 Achievement rates are grouped by detour over every map of each split, and listed per leg for the hand-drawn maps.
 
-Run: python benchmarks/goto_legs.py DIR [--method hnsdt] [--mode cost] [--family keydoor_maze --maps 4000]
-where DIR is `python benchmarks/generalisation.py --set operators=goto ... --keep DIR`'s folder (its
-results/segments.csv; the layouts are rebuilt from their names: a generated family's `<family>-<seed>`, MiniGrid's
-`<env id>@<seed>`, a drawn map's file path, relative to this repository). `--family F --maps N` also gives how
-the GoTo legs of the family's first N maps (its training maps, seeds 0..N-1), planned from their starts, fall
-into the same detour groups: what the executor was shown.
+Run: python benchmarks/goto_legs.py DIR [--method hnsdt]
+where DIR is `python benchmarks/generalisation.py --set operators=goto ... --keep DIR`'s folder: its
+results/segments.csv, and its params.yaml, from which the run's layouts (hnsdt.generalisation.layout_splits) and
+planner mode come. The last table row gives how the GoTo legs of the run's training maps, planned from their starts,
+fall into the same detour groups: what the executor was shown.
 """
 
 from __future__ import annotations
@@ -21,26 +20,13 @@ from pathlib import Path
 
 import pandas as pd
 
-from hnsdt.envs.generate import generate
-from hnsdt.envs.layout import load_layout
+from hnsdt import generalisation as gen
+from hnsdt.core.config import load_params
 from hnsdt.symbolic.abstraction import SymbolicState
 from hnsdt.symbolic.operators import GOTO_KINDS, MOVE, apply
 from hnsdt.symbolic.planner import plan
 
 BUCKETS = [(0, 0, "0 (straight)"), (1, 4, "2-4"), (5, 10, "6-10"), (11, 30, "12-30"), (31, 10_000, "over 30")]
-
-
-def layout_of(name: str):
-    """A layout rebuilt from the name the evaluation's tables give it."""
-    if "@" in name:
-        from hnsdt.envs.minigrid_adapter import from_minigrid
-
-        env_id, seed = name.rsplit("@", 1)
-        return from_minigrid(env_id, int(seed))
-    if name.endswith(".txt"):
-        return load_layout(Path(name))
-    family, seed = name.rsplit("-", 1)
-    return generate(family, int(seed))
 
 
 def legs(layout, mode: str) -> list[dict]:
@@ -77,10 +63,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("dir", type=Path, help="a folder kept by benchmarks/generalisation.py --keep")
     ap.add_argument("--method", default="hnsdt")
-    ap.add_argument("--mode", default="cost", help="the planner's mode the run used (planner.mode)")
-    ap.add_argument("--family", help="also the detours of this generated family's first --maps maps")
-    ap.add_argument("--maps", type=int, default=4000)
     args = ap.parse_args()
+    params = load_params(args.dir / "params.yaml")
+    mode = params.planner.mode
+    layouts = {src.name: src for src in gen.layout_splits(params)}  # (every training map too: the last row)
     segments = pd.read_csv(args.dir / "results/segments.csv")
     segments = segments[segments.method == args.method]
     if segments.empty:
@@ -88,11 +74,11 @@ def main() -> None:
     tried = first_attempts(segments)
     rows = []
     for name, split in tried[["layout", "split"]].drop_duplicates().itertuples(index=False):
-        for leg, info in enumerate(legs(layout_of(name), args.mode)):
+        for leg, info in enumerate(legs(layouts[name].layout, mode)):
             mine = tried[(tried.layout == name) & (tried.leg == leg)]
             if len(mine) and set(mine.operator) != {info["operator"]}:
                 raise SystemExit(f"error: {name} leg {leg}: the run's {sorted(set(mine.operator))} is not the "
-                                 f"plan's {info['operator']} (another --mode?)")
+                                 f"plan's {info['operator']}")
             rows.append(dict(info, split=split, layout=name, leg=leg, reached=len(mine),
                              achieved=int(mine.achieved.astype(bool).sum())))
     table = pd.DataFrame(rows)
@@ -109,11 +95,10 @@ def main() -> None:
             cells.append(f"{b.achieved.sum() / b.reached.sum():.2f} of {b.reached.sum()} ({len(b)} legs)"
                          if b.reached.sum() else "–")
         print(f"| {split} | " + " | ".join(cells) + " |")
-    if args.family:
-        shown = pd.Series([bucket(leg["detour"]) for seed in range(args.maps)
-                           for leg in legs(generate(args.family, seed), args.mode) if leg["goto"]])
-        print(f"| {args.family} seeds 0-{args.maps - 1} (share of {len(shown)} legs) | " + " | ".join(
-            f"{(shown == label).mean():.3f}" for *_, label in BUCKETS) + " |")
+    training = [src.layout for src in layouts.values() if src.split == "train"]
+    shown = pd.Series([bucket(leg["detour"]) for layout in training for leg in legs(layout, mode) if leg["goto"]])
+    print(f"| the {len(training)} training maps (share of their {len(shown)} legs) | " + " | ".join(
+        f"{(shown == label).mean():.3f}" for *_, label in BUCKETS) + " |")
     drawn = goto[goto.split == "drawn"]
     if len(drawn):
         print("\nthe hand-drawn maps' GoTo legs (first plan from the start):")
