@@ -723,7 +723,8 @@ def test_our_arm_plans_over_the_experiments_operators_and_learns_their_labels(tm
 
 def test_no_two_splits_share_a_map_and_validation_is_never_evaluated():
     """The default experiment's training, validation, held-out, MiniGrid and hand-drawn maps are pairwise
-    distinct grids; a generated grid already in an earlier split is skipped, not reused."""
+    distinct grids, and the four maps drawn after every choice (``layouts/drawn_later``) are none of them; a generated
+    grid already in an earlier split is skipped, not reused."""
     from hnsdt import generalisation as gen
     from hnsdt.core.config import load_params
     from hnsdt.envs.generate import generate
@@ -736,6 +737,8 @@ def test_no_two_splits_share_a_map_and_validation_is_never_evaluated():
     assert {s.split for s in evaluated} == {"train", "heldout", "minigrid", "minigrid_16x16", "drawn"}
     texts = [s.layout.text for s in evaluated + validation]
     assert len(set(texts)) == len(texts)
+    later = gen.drawn_layouts(REPO / "layouts/drawn_later", g.drawn.max_steps)  # (checked usable as they load)
+    assert len(later) == 4 and not {s.layout.text for s in later} & set(texts)
     first = generate(g.family, gen.VALIDATION_SEED)
     seen = [gen.Source("train", first, 10)]
     assert gen._unseen(params, "validation", gen.VALIDATION_SEED, 1, seen)[0].layout == generate(
