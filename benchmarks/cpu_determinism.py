@@ -66,7 +66,7 @@ oc, _, _ = train_options(lay, 100, OptionCriticConfig(lay.n_flags, *lay.shape),
                          OptionsConfig(env_steps=6000, learning_starts=1000, seed=0), progress=False)
 oc_s = time.perf_counter() - t
 
-rnns, rnn_steps = [], 0
+rnns, rnn_steps, B, T = [], 0, 16, 40
 t = time.perf_counter()
 for cell, layers, hidden, hierarchical in (("lstm", 3, 256, True), ("gru", 2, 128, False)):
     torch.manual_seed(0)
@@ -74,7 +74,6 @@ for cell, layers, hidden, hierarchical in (("lstm", 3, 256, True), ("gru", 2, 12
     rnn = RecurrentPolicy(RecurrentConfig(cell, 1, 5, 5, n_layers=layers, hidden=hidden, hierarchical=hierarchical))
     opt = Adam(rnn.parameters(), 1e-3)
     for _ in range(10):
-        B, T = 16, 40
         lengths = g.integers(4, T + 1, B)
         mask = torch.from_numpy(np.arange(T)[None, :] < lengths[:, None])
         st = np.stack([g.integers(0, 5, (B, T)), g.integers(0, 5, (B, T)), g.integers(0, 2, (B, T))], -1)

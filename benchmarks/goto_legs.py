@@ -72,10 +72,11 @@ def main() -> None:
     if segments.empty:
         raise SystemExit(f"error: no segments of {args.method!r} in {args.dir / 'results/segments.csv'}")
     tried = first_attempts(segments)
+    by_leg = dict(tuple(tried.groupby(["layout", "leg"], sort=False)))  # (layout, leg) -> its segments
     rows = []
     for name, split in tried[["layout", "split"]].drop_duplicates().itertuples(index=False):
         for leg, info in enumerate(legs(layouts[name].layout, mode)):
-            mine = tried[(tried.layout == name) & (tried.leg == leg)]
+            mine = by_leg.get((name, leg), tried.iloc[:0])
             if len(mine) and set(mine.operator) != {info["operator"]}:
                 raise SystemExit(f"error: {name} leg {leg}: the run's {sorted(set(mine.operator))} is not the "
                                  f"plan's {info['operator']}")

@@ -1117,7 +1117,7 @@ def _benchmark(name: str):
     """A module of benchmarks/ (not a package), loaded from its file."""
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location(name, Path(__file__).resolve().parents[1] / f"benchmarks/{name}.py")
+    spec = importlib.util.spec_from_file_location(name, REPO / f"benchmarks/{name}.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -1125,7 +1125,7 @@ def _benchmark(name: str):
 
 def test_a_goto_legs_detour_is_its_shortest_path_beyond_the_manhattan_distance():
     legs = _benchmark("goto_legs").legs(
-        load_layout(Path(__file__).resolve().parents[1] / "layouts/drawn/deadend_14x14.txt"), "cost")
+        load_layout(REPO / "layouts/drawn/deadend_14x14.txt"), "cost")
     assert [leg["operator"] for leg in legs] == ["GoTo(key a)", "PickKey(a)", "GoTo(door A)", "OpenDoor(A)",
                                                 "GoTo(exit)"]
     key = legs[0]  # the key lies 9 cells from the start as the crow walks, behind a wall: 33 steps round it
