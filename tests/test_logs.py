@@ -35,7 +35,8 @@ def test_rrd_reads_back_with_every_step_labelled_and_verified(tmp_path, keydoor)
     assert reader.recordings()[0].recording_id == "symbolic/keydoor/fp0.2/seed0/ep0"
     assert len(reader.blueprints()) == 1  # opens laid out
     rows = _rows(path)
-    assert rows["/grid/cells"] == rows["/grid/agent"] == ep.length + 1  # every state, the final one included
+    assert rows["/grid/cells"] == rows["/grid/agent"] == rows["/grid/path"] == ep.length + 1  # every state, the
+    # final one included
     assert rows["/reward/step"] == rows["/reward/cumulative"] == ep.length
     assert rows["/plan"] == 1 and rows["/subgoal"] == len(ep.segments)
     assert rows["/events"] == ep.length + len(ep.segments) + 1  # actions, sub-goal changes, the outcome
@@ -45,6 +46,13 @@ def test_rrd_reads_back_with_every_step_labelled_and_verified(tmp_path, keydoor)
     assert {k: props[k] for k in meta} == {k: [v] for k, v in meta.items()} and props["success"] == [ep.success]
     legend = {c["class_description"]["info"]["label"] for c in chunks["/grid"].column(1).to_pylist()[0][0]}
     assert legend == {"floor", "wall", "exit", "key", "door (locked)", "door (open)", "item", "agent"}
+    # the way walked so far: at step t the centres of the cells of states 0..t, the last one the agent's
+    batch = chunks["/grid/path"]
+    strips = [row[0] for row in batch.column(batch.schema.names.index("LineStrips2D:strips")).to_pylist()]
+    agent = chunks["/grid/agent"]
+    centres = [row[0] for row in agent.column(agent.schema.names.index("Points2D:positions")).to_pylist()]
+    assert [len(s) for s in strips] == list(range(1, ep.length + 2))
+    assert strips[-1] == centres and all(s == centres[:len(s)] for s in strips)
     summary = str(reader.store().summary())
     assert "episode" in summary and "step" in summary  # both timelines
     # the cells: walls where the layout has walls, the key until it is picked up

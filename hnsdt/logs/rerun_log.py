@@ -1,7 +1,7 @@
 """An episode as a rerun recording (.rrd) that opens laid out and explains itself: the grid as labelled cells
 (an annotation context gives every class its name and colour, so the viewer shows a legend and hover labels),
-the agent, the plan, the active sub-goal, events and rewards; recording properties say which method, env,
-fail_prob, seed and episode it is, and from which code revision and params."""
+the agent and the way it has walked so far, the plan, the active sub-goal, events and rewards; recording
+properties say which method, env, fail_prob, seed and episode it is, and from which code revision and params."""
 
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from hnsdt.symbolic.subgoals import ID_TO_NAME
 
 
 LABELS = {"goal": "exit", "door_closed": "door (locked)", "door_open": "door (open)"}
+PATH_COLOUR, PATH_RADIUS = np.array([200, 40, 160, 200], dtype=np.uint8), 0.08  # RGBA (no cell's colour); cells
 ANNOTATIONS = rr.AnnotationContext([rr.AnnotationInfo(id=i, label=LABELS.get(name, name), color=COLOURS[name])
                                     for i, name in CLASSES.items()])
 
@@ -100,6 +101,12 @@ def _log_episode(stream: rr.RecordingStream, tmp: Path, rec: EpisodeRecord, epis
     stream.send_columns("grid/agent", indexes=_times(episode_index, range(len(states))),
                         columns=rr.Points2D.columns(positions=centres, radii=np.full(len(states), 0.35 * CELL_PX),
                                                     class_ids=np.full(len(states), CLASS_ID["agent"])))
+    # the way walked so far, one strip per state (the viewer shows the one at its time cursor): where the agent
+    # has been — its loops and detours — beside where it is
+    stream.send_columns("grid/path", indexes=_times(episode_index, range(len(states))),
+                        columns=rr.LineStrips2D.columns(strips=[centres[:t + 1] for t in range(len(states))],
+                                                        radii=np.full(len(states), PATH_RADIUS * CELL_PX),
+                                                        colors=np.tile(PATH_COLOUR, (len(states), 1))))
     times = _times(episode_index, range(rec.length))
     rewards = np.asarray(rec.rewards, dtype=np.float64)
     stream.send_columns("reward/step", indexes=times, columns=rr.Scalars.columns(scalars=rewards))
