@@ -10,7 +10,9 @@ from rerun.chunk import RrdReader
 from conftest import hnsdt_cli
 from hnsdt.agents import SymbolicAgent, rollout
 from hnsdt.envs import KeyDoorVectorEnv
+from hnsdt.envs.render import CELL_PX, COLOURS
 from hnsdt.logs import record_from_episode, write_mcap, write_rrd
+from hnsdt.logs.record import PATH_COLOUR
 
 
 def _episode(layout):
@@ -78,22 +80,50 @@ def test_recording_files_are_what_the_writers_write(tmp_path, keydoor):
     assert RrdReader(str(tmp_path / "handed.rrd")).recordings()[0].recording_id == rec.episode_id
 
 
+def _protobuf_class(schema):
+    """The message class an MCAP protobuf schema (a FileDescriptorSet) describes."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    pool = descriptor_pool.DescriptorPool()
+    for file in descriptor_pb2.FileDescriptorSet.FromString(schema.data).file:
+        pool.Add(file)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+
+
 def test_mcap_reads_back_with_foxglove_schemas_and_json_steps(tmp_path, keydoor):
     ep = _episode(keydoor)
     rec = record_from_episode("symbolic/keydoor/fp0.2/seed0/ep0", keydoor, ep)
     path = write_mcap(tmp_path / "ep.mcap", rec)
-    topics, schemas, steps = {}, {}, []
+    topics, schemas, steps, frames = {}, {}, [], []
     with open(path, "rb") as f:  # the reader checks every chunk's CRC as it goes
         for schema, channel, message in make_reader(f, validate_crcs=True).iter_messages():
             topics[channel.topic] = topics.get(channel.topic, 0) + 1
             schemas[channel.topic] = schema.name
             if channel.topic == "/step":
                 steps.append(json.loads(message.data))
+            if channel.topic == "/grid":  # decoded through the schema in the file, as Foxglove does
+                frames.append(_protobuf_class(schema).FromString(message.data))
     assert schemas["/grid"] == "foxglove.RawImage" and schemas["/events"] == "foxglove.Log"
     assert topics["/grid"] == topics["/step"] == ep.length
     assert [s["action"] for s in steps] == ep.actions.tolist()
     assert steps[0]["subgoal"] == "GoTo(key a)" and steps[-1]["state"] == ep.states[-2].tolist()
     assert np.isclose(steps[-1]["return"], ep.ret)
+    # the way walked so far is drawn on each frame, under the agent: at every cell centre the path colour where
+    # the agent has been before (and is not now), the agent's where it is, neither anywhere else
+    visited = set()
+    for t, frame in enumerate(frames):
+        img = np.frombuffer(frame.data, np.uint8).reshape(frame.height, frame.width, 3)
+        here = tuple(ep.states[t][:2])
+        visited.add(here)
+        for r, c in np.ndindex(keydoor.shape):
+            centre = tuple(img[r * CELL_PX + CELL_PX // 2, c * CELL_PX + CELL_PX // 2])
+            expected = (COLOURS["agent"] if (r, c) == here else tuple(PATH_COLOUR[:3]) if (r, c) in visited and t
+                        else None)
+            assert (centre == expected) if expected else centre not in (COLOURS["agent"], tuple(PATH_COLOUR[:3]))
+    # ... as a line: the last frame has it halfway between the centres of the two cells of every move before it
+    cells = ep.states[:len(frames), :2] * CELL_PX + CELL_PX // 2
+    moves = [(a + b) // 2 for a, b in zip(cells[:-1], cells[1:]) if (a != b).any()]
+    assert moves and all(tuple(img[y, x]) == tuple(PATH_COLOUR[:3]) for y, x in moves)
 
 
 def test_the_foxglove_layout_opens_the_recorded_topics(tmp_path, keydoor):

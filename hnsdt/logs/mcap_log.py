@@ -1,6 +1,7 @@
-"""An episode as an MCAP file for Foxglove: the grid as ``foxglove.RawImage``, actions and operator changes as
-``foxglove.Log``, and a JSON topic ``/step`` with state, action, sub-goal and reward; and the Foxglove layout
-that opens those topics side by side (:func:`episode_layout`, built with the SDK's ``foxglove.layouts``)."""
+"""An episode as an MCAP file for Foxglove: the grid as ``foxglove.RawImage``, with the way walked so far drawn
+on it as in the rerun recording; actions and operator changes as ``foxglove.Log``, and a JSON topic ``/step`` with
+state, action, sub-goal and reward; and the Foxglove layout that opens those topics side by side
+(:func:`episode_layout`, built with the SDK's ``foxglove.layouts``)."""
 
 from __future__ import annotations
 
@@ -9,13 +10,14 @@ from pathlib import Path
 
 import foxglove
 import foxglove.layouts as fl
+import numpy as np
 from foxglove.channels import LogChannel, RawImageChannel
 from foxglove.messages import Log, LogLevel, RawImage, Timestamp
 
 from hnsdt.envs.keydoor import ACTION_NAMES
-from hnsdt.envs.render import render_rgb
+from hnsdt.envs.render import CELL_PX, COLOURS, render_rgb
 from hnsdt.core.fileio import atomic_file
-from hnsdt.logs.record import EpisodeRecord
+from hnsdt.logs.record import PATH_COLOUR, PATH_WIDTH, EpisodeRecord
 from hnsdt.symbolic.subgoals import ID_TO_NAME
 
 STEP_SCHEMA = {
@@ -53,6 +55,21 @@ def write_layout(path: str | Path) -> Path:
     return Path(path)
 
 
+def trace_step(path: np.ndarray, a, b, cell_px: int = CELL_PX) -> None:
+    """Mark on the pixel mask ``path`` the line from the centre of cell ``a`` to that of cell ``b`` (the same cell
+    or a neighbour: a step), ``PATH_WIDTH`` cells wide."""
+    (y0, x0), (y1, x1) = (np.asarray(c[:2], dtype=np.int64) * cell_px + cell_px // 2 for c in (a, b))
+    half = max(int(round(PATH_WIDTH * cell_px)) // 2, 1)
+    path[min(y0, y1) - half:max(y0, y1) + half + 1, min(x0, x1) - half:max(x0, x1) + half + 1] = True
+
+
+def draw_path(img: np.ndarray, path: np.ndarray) -> np.ndarray:
+    """``img`` (a :func:`render_rgb` frame) with the pixels of ``path`` in the path's colour, under the agent."""
+    under = path & ~(img == COLOURS["agent"]).all(axis=-1)
+    img[under] = PATH_COLOUR[:3]
+    return img
+
+
 def write_mcap(path: str | Path, rec: EpisodeRecord) -> Path:
     path = Path(path)  # atomic_file creates the parent folder
     with atomic_file(path) as tmp:
@@ -64,10 +81,15 @@ def write_mcap(path: str | Path, rec: EpisodeRecord) -> Path:
             steps = foxglove.Channel("/step", schema=STEP_SCHEMA, message_encoding="json", context=ctx)
             dt_ns = int(1e9 / rec.fps)
             cum, prev = 0.0, None
+            walked = None  # the pixels of the way walked so far
             for t in range(rec.length):
                 ns = t * dt_ns
                 stamp = Timestamp(sec=ns // 10**9, nsec=ns % 10**9)
                 img = render_rgb(rec.layout, rec.states[t])
+                walked = np.zeros(img.shape[:2], dtype=bool) if walked is None else walked
+                if t:
+                    trace_step(walked, rec.states[t - 1], rec.states[t])
+                img = draw_path(img, walked)
                 grid.log(RawImage(timestamp=stamp, frame_id="grid", width=img.shape[1], height=img.shape[0],
                                   encoding="rgb8", step=img.shape[1] * 3, data=img.tobytes()), log_time=ns)
                 name = ID_TO_NAME[int(rec.subgoal_ids[t])]

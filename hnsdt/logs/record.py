@@ -11,6 +11,11 @@ from hnsdt.envs.layout import Layout
 from hnsdt.symbolic.subgoals import ID_TO_NAME
 
 
+# The way an agent has walked, drawn in both formats over the grid: a colour no cell has (RGBA; the .mcap images
+# take its RGB) and a width, in cells.
+PATH_COLOUR, PATH_WIDTH = np.array([200, 40, 160, 200], dtype=np.uint8), 0.16
+
+
 @dataclass
 class EpisodeRecord:
     episode_id: str  # e.g. "hnsdt/keydoor/fp0.1/seed0/ep3": the key of the per-episode table

@@ -14,12 +14,11 @@ import rerun.blueprint as rrb
 from hnsdt.envs.keydoor import ACTION_NAMES
 from hnsdt.envs.render import CELL_PX, CLASS_ID, CLASSES, COLOURS, cell_classes
 from hnsdt.core.fileio import atomic_file
-from hnsdt.logs.record import EpisodeRecord
+from hnsdt.logs.record import PATH_COLOUR, PATH_WIDTH, EpisodeRecord
 from hnsdt.symbolic.subgoals import ID_TO_NAME
 
 
 LABELS = {"goal": "exit", "door_closed": "door (locked)", "door_open": "door (open)"}
-PATH_COLOUR, PATH_RADIUS = np.array([200, 40, 160, 200], dtype=np.uint8), 0.08  # RGBA (no cell's colour); cells
 ANNOTATIONS = rr.AnnotationContext([rr.AnnotationInfo(id=i, label=LABELS.get(name, name), color=COLOURS[name])
                                     for i, name in CLASSES.items()])
 
@@ -105,7 +104,7 @@ def _log_episode(stream: rr.RecordingStream, tmp: Path, rec: EpisodeRecord, epis
     # has been — its loops and detours — beside where it is
     stream.send_columns("grid/path", indexes=_times(episode_index, range(len(states))),
                         columns=rr.LineStrips2D.columns(strips=[centres[:t + 1] for t in range(len(states))],
-                                                        radii=np.full(len(states), PATH_RADIUS * CELL_PX),
+                                                        radii=np.full(len(states), PATH_WIDTH / 2 * CELL_PX),
                                                         colors=np.tile(PATH_COLOUR, (len(states), 1))))
     times = _times(episode_index, range(rec.length))
     rewards = np.asarray(rec.rewards, dtype=np.float64)
