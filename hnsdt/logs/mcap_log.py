@@ -81,15 +81,13 @@ def write_mcap(path: str | Path, rec: EpisodeRecord) -> Path:
             steps = foxglove.Channel("/step", schema=STEP_SCHEMA, message_encoding="json", context=ctx)
             dt_ns = int(1e9 / rec.fps)
             cum, prev = 0.0, None
-            walked = None  # the pixels of the way walked so far
+            walked = np.zeros(np.multiply(rec.layout.shape, CELL_PX), dtype=bool)  # the way's pixels so far
             for t in range(rec.length):
                 ns = t * dt_ns
                 stamp = Timestamp(sec=ns // 10**9, nsec=ns % 10**9)
-                img = render_rgb(rec.layout, rec.states[t])
-                walked = np.zeros(img.shape[:2], dtype=bool) if walked is None else walked
                 if t:
                     trace_step(walked, rec.states[t - 1], rec.states[t])
-                img = draw_path(img, walked)
+                img = draw_path(render_rgb(rec.layout, rec.states[t]), walked)
                 grid.log(RawImage(timestamp=stamp, frame_id="grid", width=img.shape[1], height=img.shape[0],
                                   encoding="rgb8", step=img.shape[1] * 3, data=img.tobytes()), log_time=ns)
                 name = ID_TO_NAME[int(rec.subgoal_ids[t])]
