@@ -101,8 +101,9 @@ def test_mcap_reads_back_with_foxglove_schemas_and_json_steps(tmp_path, keydoor)
             schemas[channel.topic] = schema.name
             if channel.topic == "/step":
                 steps.append(json.loads(message.data))
-            if channel.topic == "/grid":  # decoded through the schema in the file, as Foxglove does
-                frames.append(_protobuf_class(schema).FromString(message.data))
+            if channel.topic == "/grid":
+                grid_schema = schema
+                frames.append(message.data)
     assert schemas["/grid"] == "foxglove.RawImage" and schemas["/events"] == "foxglove.Log"
     assert topics["/grid"] == topics["/step"] == ep.length
     assert [s["action"] for s in steps] == ep.actions.tolist()
@@ -110,8 +111,9 @@ def test_mcap_reads_back_with_foxglove_schemas_and_json_steps(tmp_path, keydoor)
     assert np.isclose(steps[-1]["return"], ep.ret)
     # the way walked so far is drawn on each frame, under the agent: at every cell centre the path colour where
     # the agent has been before (and is not now), the agent's where it is, neither anywhere else
+    raw_image = _protobuf_class(grid_schema)  # decoded through the schema in the file, as Foxglove does
     visited = set()
-    for t, frame in enumerate(frames):
+    for t, frame in enumerate(map(raw_image.FromString, frames)):
         img = np.frombuffer(frame.data, np.uint8).reshape(frame.height, frame.width, 3)
         here = tuple(ep.states[t][:2])
         visited.add(here)
