@@ -1,4 +1,4 @@
-"""The unseen-layout experiment (hnsdt.generalisation) outside the pipeline: other families, sizes, budgets.
+"""The unseen-layout experiment (hnsdt.compose.generalisation) outside the pipeline: other families, sizes, budgets.
 
 Runs the three stages' functions — collect on the training layouts, train each method on views, evaluate on
 the training, held-out, MiniGrid and hand-drawn layouts — in a temporary folder, with params.yaml's `generalisation`
@@ -39,15 +39,18 @@ from hnsdt.core.reproducible import pin_process
 
 pin_process()
 
-from hnsdt import generalisation as gen  # noqa: E402
-from hnsdt.core import stages  # noqa: E402
-from hnsdt.core.config import compute_settings, load_params  # noqa: E402
-from hnsdt.core.params import validate  # noqa: E402
+from hnsdt.compose import generalisation as gen  # noqa: E402
+from hnsdt.stages.collect_unseen import collect_unseen  # noqa: E402
+from hnsdt.stages.evaluate_unseen import evaluate_unseen  # noqa: E402
+from hnsdt.stages.train_unseen import plan_unseen  # noqa: E402
+from hnsdt.compose.config import compute_settings, load_params  # noqa: E402
+from hnsdt.compose.params import validate  # noqa: E402
 from hnsdt.evaluation import ablations  # noqa: E402
 from hnsdt.core.methods import DT_METHODS  # noqa: E402
-from hnsdt.evaluation.report import SPLIT_LABELS, drawn_lines, generalisation_table  # noqa: E402
+from hnsdt.report.common import SPLIT_LABELS  # noqa: E402
+from hnsdt.report.unseen import drawn_lines, generalisation_table  # noqa: E402
 from hnsdt.models.checkpoint import load_checkpoint  # noqa: E402
-from hnsdt.training import train_all  # noqa: E402
+from hnsdt.compose.training import train_all  # noqa: E402
 
 MAX_STEPS = {"keydoor": 100, "multikeydoor": 250, "keydoor_obstacles": 150, "keydoor_maze": 150,
              "keydoor_mixed": 150}
@@ -104,11 +107,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         t0 = time.perf_counter()
-        dataset = stages.collect_unseen(params, tmp / "dataset", progress=False, provenance={})
+        dataset = collect_unseen(params, tmp / "dataset", progress=False, provenance={})
         times["collect"] = time.perf_counter() - t0
         for method in g["methods"] + g["baselines"]:
             t0 = time.perf_counter()
-            runs = stages.plan_unseen(params, method, dataset)
+            runs = plan_unseen(params, method, dataset)
             train_all(runs, g["family"], tmp / "models" / method, tmp / "curves" / method, compute, progress=False)
             times[f"train {method}"] = time.perf_counter() - t0
             kept = kept_validation(tmp / "models" / method, params.generalisation.seeds_of(method))
@@ -127,7 +130,7 @@ def main() -> None:
                 validation += validation_lines(kept, method, f" (relabel round {r + 1})")
                 best[method] = mean_validation(kept)
         t0 = time.perf_counter()
-        stages.evaluate_unseen(params, tmp / "models", tmp / "results", compute, progress=False)
+        evaluate_unseen(params, tmp / "models", tmp / "results", compute, progress=False)
         times["evaluate"] = time.perf_counter() - t0
         summary = pd.read_csv(tmp / "results/summary.csv")
         table = generalisation_table(summary)
@@ -230,7 +233,7 @@ def relabelled_run(params, run, models: Path, episodes: int):
     added to its data (and to the behaviours it learns from)."""
     from dataclasses import replace
 
-    from hnsdt.core.config import layout_executor
+    from hnsdt.compose.config import layout_executor
     from hnsdt.data.relabel import RELABELLED, join_frames, learner_frames
 
     g = params.need("generalisation")

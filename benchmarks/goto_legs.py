@@ -8,7 +8,7 @@ Achievement rates are grouped by detour over every map of each split, and listed
 
 Run: python benchmarks/goto_legs.py DIR [--method hnsdt]
 where DIR is `python benchmarks/generalisation.py --set operators=goto ... --keep DIR`'s folder: its
-results/segments.csv, and its params.yaml, from which the run's layouts (hnsdt.generalisation.layout_splits) and
+results/segments.csv, and its params.yaml, from which the run's layouts (hnsdt.compose.generalisation.layout_splits) and
 planner mode come. The last table row gives how the GoTo legs of the run's training maps, planned from their starts,
 fall into the same detour groups: what the executor was shown.
 """
@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from hnsdt import generalisation as gen
-from hnsdt.core.config import load_params
+from hnsdt.compose import generalisation as gen
+from hnsdt.compose.config import load_params
 from hnsdt.symbolic.abstraction import SymbolicState
 from hnsdt.symbolic.operators import GOTO_KINDS, MOVE, apply
 from hnsdt.symbolic.planner import plan

@@ -36,11 +36,13 @@ def run(task):
     from dataclasses import replace
     from pathlib import Path
 
-    from hnsdt.core.config import env_spec, load_params, method_executor
-    from hnsdt.evaluation.evaluate import Cell, layout_navigator, build_agent, run_cell, segment_rows
+    from hnsdt.compose.config import env_spec, load_params, method_executor
+    from hnsdt.evaluation.paper import Cell, run_cell, segment_rows
+    from hnsdt.evaluation.segments import layout_navigator
+    from hnsdt.evaluation.runs import build_agent
     from hnsdt.core.methods import DT_METHODS
     from hnsdt.models.train import train_dt
-    from hnsdt.training import plan_runs
+    from hnsdt.compose.training import plan_runs
 
     params = load_params(params_path, overrides)
     (task,) = plan_runs(params, env, method, [seed], Path(f"data/datasets/{env}"))
@@ -123,7 +125,7 @@ def main() -> None:
     if args.decompose and not segments.empty:
         if args.validated:
             segments["epochs"] = "validated"
-        from hnsdt.evaluation.report import step_decomposition
+        from hnsdt.report.paper_arm import step_decomposition
 
         by = ["method", "epochs", "fail_prob"]
         episodes = segments.groupby([*by, "seed"]).n_episodes.first().groupby(by).sum()

@@ -49,7 +49,7 @@ def main() -> None:
     args = parser.parse_args()
 
     from hnsdt import training
-    from hnsdt.core.config import load_params
+    from hnsdt.compose.config import load_params
     from hnsdt.models.dt import DecisionTransformer
     from hnsdt.models.fit import to_device
     from hnsdt.models.train import objective_for

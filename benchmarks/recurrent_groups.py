@@ -41,8 +41,8 @@ def main() -> None:
 
     from hnsdt import training
     from hnsdt.baselines.recurrent import episode_batch, training_episodes
-    from hnsdt.core import stages
-    from hnsdt.core.config import load_params
+    from hnsdt.stages.train_unseen import plan_unseen
+    from hnsdt.compose.config import load_params
     from hnsdt.models import recurrent
     from hnsdt.models.fit import to_device
 
@@ -56,7 +56,7 @@ def main() -> None:
     for env in args.envs:
         for method in args.methods:
             if env == "unseen":
-                task = stages.plan_unseen(params, method, Path("generalisation/dataset"))[0]
+                task = plan_unseen(params, method, Path("generalisation/dataset"))[0]
             else:
                 task = training.plan_runs(params, env, method, [0], Path("data/datasets") / env)[0]
             starts, lengths = training_episodes(task.data, task.train_cfg.behaviours)

@@ -17,7 +17,7 @@ from hnsdt.core.methods import LEARNED
 
 def _resolve_env(args) -> tuple[str, object, int]:
     """--env is a params env name (keydoor), or a registered id; --layout overrides the layout."""
-    from hnsdt.core.config import env_spec, load_params
+    from hnsdt.compose.config import env_spec, load_params
     from hnsdt.envs import ENV_IDS, load_layout
 
     if args.env in ENV_IDS:
@@ -75,10 +75,10 @@ def cmd_pddl(args) -> None:
 
 
 def cmd_collect(args) -> None:
-    from hnsdt.core import stages
-    from hnsdt.core.config import load_params
+    from hnsdt.compose.config import load_params
+    from hnsdt.stages.collect import collect
 
-    stages.collect(load_params(args.params), args.env, Path(args.out or f"data/datasets/{args.env}"), args.repo_id,
+    collect(load_params(args.params), args.env, Path(args.out or f"data/datasets/{args.env}"), args.repo_id,
                    progress=not args.quiet)
 
 
@@ -106,31 +106,31 @@ def cmd_dataset_push(args) -> None:
 def cmd_train(args) -> None:
     """Train one method on one env for every seed (train.seeds, or --seed): one task per seed on the
     executor of ``compute`` (or --executor/--workers)."""
-    from hnsdt.core import stages
-    from hnsdt.core.config import compute_settings, load_params
+    from hnsdt.compose.config import compute_settings, load_params
+    from hnsdt.stages.train import train
 
     params = load_params(args.params)
-    stages.train(params, args.env, args.method, Path(args.dataset or f"data/datasets/{args.env}"),
+    train(params, args.env, args.method, Path(args.dataset or f"data/datasets/{args.env}"),
                  Path(args.out or f"models/{args.env}/{args.method}"),
                  Path(args.curves or f"plots/train/{args.env}-{args.method}"), seeds=args.seed,
                  compute=compute_settings(params, args.executor, args.workers), progress=not args.quiet)
 
 
 def cmd_evaluate(args) -> None:
-    from hnsdt.core import stages
-    from hnsdt.core.config import compute_settings, load_params
+    from hnsdt.compose.config import compute_settings, load_params
+    from hnsdt.stages.evaluate import evaluate
 
     params = load_params(args.params)
-    stages.evaluate(params, Path(args.models), Path(args.datasets), Path(args.out),
+    evaluate(params, Path(args.models), Path(args.datasets), Path(args.out),
                     Path(args.recordings) if args.recordings else None,
                     compute=compute_settings(params, args.executor, args.workers), progress=not args.quiet)
 
 
 def cmd_report(args) -> None:
-    from hnsdt.core import stages
-    from hnsdt.core.config import load_params
+    from hnsdt.compose.config import load_params
+    from hnsdt.stages.report import report
 
-    stages.report(load_params(args.params), Path(args.results), Path(args.out),
+    report(load_params(args.params), Path(args.results), Path(args.out),
                   generalisation=Path(args.generalisation) if args.generalisation else None,
                   headline=Path(args.headline) if args.headline else None,
                   ablations=Path(args.ablations) if args.ablations else None,
@@ -200,14 +200,14 @@ MAX_MADE_AGAIN = 20  # episodes one `hnsdt replay` makes again (each a run of it
 
 def _record_again(args, row, table_path: Path, out: Path) -> Path:
     """An episode `evaluate` did not record (``logs.episodes_per_cell``), made again and checked against its row
-    (:func:`hnsdt.core.stages.replay_evaluated`), written to ``out`` (outside every pipeline output)."""
-    from hnsdt.core import stages
-    from hnsdt.core.config import compute_settings, load_params
+    (:func:`hnsdt.stages.replay.replay_evaluated`), written to ``out`` (outside every pipeline output)."""
+    from hnsdt.compose.config import compute_settings, load_params
+    from hnsdt.stages.replay import replay_evaluated
 
     params = load_params(args.params)
     print(f"  not recorded: running {row['method']} on {row['env']} with seed {row['seed']} again, as `evaluate` "
           "ran it", flush=True)
-    files = stages.replay_evaluated(params, Path(args.models), row, table_path, compute_settings(params).threads)
+    files = replay_evaluated(params, Path(args.models), row, table_path, compute_settings(params).threads)
     return _write_recording(files, out)
 
 
@@ -235,9 +235,8 @@ def _open_in_rerun(rrds: list[Path]) -> None:
 
 
 def cmd_generalisation(args) -> None:
-    """The unseen-layout experiment's stages (hnsdt.generalisation): collect, train one method, evaluate."""
-    from hnsdt.core import stages
-    from hnsdt.core.config import compute_settings, load_params, unseen_experiment
+    """The unseen-layout experiment's stages (hnsdt.compose.generalisation): collect, train one method, evaluate."""
+    from hnsdt.compose.config import compute_settings, load_params, unseen_experiment
 
     params = unseen_experiment(load_params(args.params), args.experiment)  # (an unknown name: one line)
     if args.drawn:  # a folder of the user's maps in place of the experiment's drawn maps
@@ -254,7 +253,9 @@ def cmd_generalisation(args) -> None:
     if args.action == "replay":
         if not args.episode:
             raise ValueError("generalisation replay needs --episode METHOD/seedK/LAYOUT/fpP/epI")
-        row, files = stages.replay_unseen(params, Path(args.models), Path(args.results), args.episode,
+        from hnsdt.stages.replay import replay_unseen
+
+        row, files = replay_unseen(params, Path(args.models), Path(args.results), args.episode,
                                           compute_settings(params).threads)
         print(f"{args.episode} ({row['split']}): success={row['success']}, steps={row['steps']} (the optimum's "
               f"{row['optimal_steps']:g}), reward={row['reward']}")
@@ -267,16 +268,22 @@ def cmd_generalisation(args) -> None:
     if not args.out:
         raise ValueError(f"generalisation {args.action} needs --out")
     if args.action == "collect":
-        stages.collect_unseen(params, Path(args.out), progress=not args.quiet)
+        from hnsdt.stages.collect_unseen import collect_unseen
+
+        collect_unseen(params, Path(args.out), progress=not args.quiet)
         return
     compute = compute_settings(params, args.executor, args.workers)
     if args.action == "train":
         if not args.method or not args.curves:
             raise ValueError("generalisation train needs --method and --curves")
-        stages.train_unseen(params, args.method, Path(args.dataset), Path(args.out), Path(args.curves), compute,
+        from hnsdt.stages.train_unseen import train_unseen
+
+        train_unseen(params, args.method, Path(args.dataset), Path(args.out), Path(args.curves), compute,
                             progress=not args.quiet)
         return
-    stages.evaluate_unseen(params, Path(args.models), Path(args.out), compute, progress=not args.quiet,
+    from hnsdt.stages.evaluate_unseen import evaluate_unseen
+
+    evaluate_unseen(params, Path(args.models), Path(args.out), compute, progress=not args.quiet,
                            splits=args.splits, methods=args.methods)
 
 
@@ -431,7 +438,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "replay" and not args.episode_id and args.dataset is None:
         parser.error("replay needs an EPISODE_ID or --dataset")
-    from hnsdt.core.stages import guarded
+    from hnsdt.stages.common import guarded
 
     return guarded(args.func, args)
 

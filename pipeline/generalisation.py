@@ -1,5 +1,5 @@
 """DVC stages `collect_generalisation`, `train_generalisation`, `evaluate_generalisation` and
-`unseen_experiment@NAME`: the unseen-layout experiments (hnsdt.generalisation, through hnsdt.core.stages).
+`unseen_experiment@NAME`: the unseen-layout experiments (hnsdt.compose.generalisation, through hnsdt.stages).
 
 Usage: python pipeline/generalisation.py collect --out generalisation/dataset
        python pipeline/generalisation.py train --method METHOD --dataset generalisation/dataset
@@ -17,7 +17,7 @@ from pathlib import Path
 # same bytes on any machine (hash seed, CPU kernels, threads): re-run pinned before NumPy loads (as hnsdt would)
 runpy.run_path(str(Path(__file__).resolve().parents[1] / "hnsdt/core/reproducible.py"))["pin_process"]()
 
-from hnsdt.core import stages  # noqa: E402
+from hnsdt.stages.common import run  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -34,6 +34,13 @@ if __name__ == "__main__":
     for p in sub.choices.values():
         p.add_argument("--experiment", help="a name of unseen_experiments in params.yaml")
     args = vars(parser.parse_args())
-    stage = {"collect": stages.collect_unseen, "train": stages.train_unseen, "evaluate": stages.evaluate_unseen,
-             "all": stages.run_unseen_experiment}
-    sys.exit(stages.run(stage[args.pop("action")], **args))
+    action = args.pop("action")  # (each action imports its own stage module: a stage depends on its code alone)
+    if action == "collect":
+        from hnsdt.stages.collect_unseen import collect_unseen as stage
+    elif action == "train":
+        from hnsdt.stages.train_unseen import train_unseen as stage
+    elif action == "evaluate":
+        from hnsdt.stages.evaluate_unseen import evaluate_unseen as stage
+    else:
+        from hnsdt.stages.unseen_experiment import run_unseen_experiment as stage
+    sys.exit(run(stage, **args))

@@ -1,5 +1,5 @@
 """DVC stages `train`, `train_offline` and `train_online`: one learned method on one env, every seed of
-train.seeds in this one process (hnsdt.core.stages.train).
+train.seeds in this one process (hnsdt.stages.train).
 
 Usage: python pipeline/train.py --env ENV --method METHOD [--dataset data/datasets/ENV] --out models/ENV/METHOD
        --curves plots/train/ENV-METHOD
@@ -14,7 +14,8 @@ from pathlib import Path
 # same bytes on any machine (hash seed, CPU kernels, threads): re-run pinned before NumPy loads (as hnsdt would)
 runpy.run_path(str(Path(__file__).resolve().parents[1] / "hnsdt/core/reproducible.py"))["pin_process"]()
 
-from hnsdt.core import stages  # noqa: E402
+from hnsdt.stages.common import run  # noqa: E402
+from hnsdt.stages.train import train  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -25,5 +26,5 @@ if __name__ == "__main__":
     parser.add_argument("--curves", required=True, type=Path)
     args = parser.parse_args()
     dataset = args.dataset or Path("data/datasets") / args.env
-    sys.exit(stages.run(stages.train, env=args.env, method=args.method, dataset=dataset, out=args.out,
+    sys.exit(run(train, env=args.env, method=args.method, dataset=dataset, out=args.out,
                         curves=args.curves))

@@ -12,8 +12,8 @@ from hnsdt.baselines.dqn import DQNAgent, DQNConfig, train_dqn
 from hnsdt.baselines.options import OptionsAgent, OptionsConfig, train_options
 from hnsdt.baselines.recurrent import RecurrentAgent, RecurrentTrainConfig, episode_batch, train_recurrent
 from hnsdt.agents.rollout import RandomAgent
-from hnsdt.core.config import ParamsError, baseline_settings, evaluate_settings, load_params
-from hnsdt.core.params import validate
+from hnsdt.compose.config import ParamsError, baseline_settings, evaluate_settings, load_params
+from hnsdt.compose.params import validate
 from hnsdt.models.windows import frames_from_arrays
 from hnsdt.envs import KeyDoorVectorEnv, load_layout
 from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint
@@ -174,7 +174,7 @@ def test_a_stack_is_of_one_training_config_and_of_linear_layers(keydoor):
 
 def test_online_seeds_train_in_one_stack_per_worker():
     from hnsdt.core.compute import Compute
-    from hnsdt.training import seed_stacks
+    from hnsdt.compose.training import seed_stacks
 
     assert [s.runs for s in seed_stacks([0, 1, 2, 3, 4], Compute(workers=2))] == [(0, 1, 2), (3, 4)]
     assert [s.runs for s in seed_stacks([0, 1], Compute(workers=4))] == [(0,), (1,)]

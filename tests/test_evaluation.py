@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 
 from conftest import REPO
-from hnsdt.evaluation.evaluate import metrics_json, per_seed_metrics, summary
+from hnsdt.evaluation.tables import metrics_json, per_seed_metrics, summary
 
 
 def _table():
@@ -47,7 +47,7 @@ def test_no_success_gives_missing_steps_not_zero():
 
 
 def test_seed_view_counts_solving_seeds_and_bootstraps_over_seeds():
-    from hnsdt.evaluation.report import seed_view
+    from hnsdt.report.claims import seed_view
 
     rows = [{"method": "dqn", "env": "e", "fail_prob": f, "seed": s, "success": s < 2, "steps": 30, "reward": 0.0}
             for s in range(5) for f in (0.0, 0.3) for _ in range(4)]  # 2 of 5 seeds always succeed, 3 never
@@ -86,7 +86,7 @@ def test_the_headline_metrics_are_few_and_are_means_over_the_failure_probabiliti
     the default methods (the planners that learn nothing are left to the report)."""
     import json
 
-    from hnsdt.evaluation.report import headline_metrics
+    from hnsdt.report.headline import headline_metrics
 
     summ = pd.read_csv(Path(REPO) / "metrics/summary.csv")  # the committed run of the paper protocol
     unseen = pd.DataFrame([{"method": m, "split": split, "fail_prob": fp, "success_mean": 0.5 + fp,
@@ -120,7 +120,8 @@ def test_a_methods_cells_stepped_as_one_batch_are_the_cells_run_alone(keydoor, m
     import torch
 
     from hnsdt.agents.executor import ExecutorConfig
-    from hnsdt.evaluation.evaluate import Batch, EvalTask, cell_batches, cell_outputs, run_batch
+    from hnsdt.evaluation.runs import Batch, EvalTask, run_batch
+    from hnsdt.evaluation.paper import cell_batches, cell_outputs
     from hnsdt.models.dt import DecisionTransformer, DTConfig
     from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig
 

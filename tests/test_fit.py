@@ -206,7 +206,7 @@ def test_a_seed_sharing_workers_pauses_after_every_epoch_when_a_plateau_ends_it(
     """Where seeds share workers (train_all), a run that a validation plateau ends — after an epoch no one knows
     beforehand — hands back its state after every epoch, so the seeds take turns epoch by epoch; a fixed budget
     pauses once, half-way. Chained through pickles (as between processes), each ends in the run's bytes."""
-    from hnsdt.training import TrainTask, train_run
+    from hnsdt.compose.training import TrainTask, train_run
 
     cfg = DTConfig("return", keydoor.n_flags, *keydoor.shape, context=4, n_layers=1, d_model=32, dropout=0.3,
                    max_timestep=100, formulation="episode")

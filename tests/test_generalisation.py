@@ -10,8 +10,11 @@ import yaml
 
 from hnsdt.envs import KeyDoorVectorEnv, LayoutError, load_layout
 from hnsdt.envs.generate import FAMILIES, FamilySizes, check_usable, generate, write_layout
-from hnsdt.core import stages
-from hnsdt.core.params import validate
+from hnsdt.stages.collect_unseen import collect_unseen
+from hnsdt.stages.evaluate_unseen import evaluate_unseen
+from hnsdt.stages.train_unseen import plan_unseen
+from hnsdt.stages.replay import replay_unseen
+from hnsdt.compose.params import validate
 from conftest import hnsdt_cli
 from hnsdt.envs.observation import (DOOR_CLOSED, DOOR_OPEN, EXIT, FLOOR, ITEM, KEY, OUTSIDE, WALL, full_view,
                                     local_view)
@@ -401,8 +404,8 @@ def test_a_view_dt_trained_on_a_handful_of_maps_reaches_its_sub_goals_on_maps_it
 
 def network_configs(params, method: str, seed: int):
     """``(view network config, training config)`` of one method and seed of the experiment."""
-    from hnsdt import generalisation as gen
-    from hnsdt.training import layout_network_configs
+    from hnsdt.compose import generalisation as gen
+    from hnsdt.compose.training import layout_network_configs
 
     return layout_network_configs(params, method, seed, gen.training_layouts(params)[0].layout)
 
@@ -511,13 +514,13 @@ def test_the_dataset_over_generated_layouts_stores_each_frames_view(tmp_path):
     """`collect` writes one LeRobot dataset over the training layouts: stock LeRobotDataset loads it, each frame's
     `observation.view` is the view of its own layout at its state, the card describes the feature, and the
     frames the learners read are view states."""
-    from hnsdt import generalisation as gen
+    from hnsdt.compose import generalisation as gen
     from hnsdt.data.lerobot_io import open_dataset
     from hnsdt.data.frames import load_frames
     from hnsdt.models.view import view_states
 
     params = _tiny_generalisation_params(tmp_path)
-    root = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False,
+    root = collect_unseen(validate(params), tmp_path / "ds", progress=False,
                                 provenance={"git_revision": "test"})
     ds = open_dataset(root)
     cols = ds.hf_dataset.with_format("numpy")[:]
@@ -543,21 +546,21 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
 
     from hnsdt.core.compute import Compute
     from hnsdt.models.checkpoint import save_checkpoint
-    from hnsdt.training import train_run
+    from hnsdt.compose.training import train_run
 
     params = _tiny_generalisation_params(tmp_path)
     g = params["generalisation"]
     g.update(methods=["hnsdt"], baselines=["gru", "dqn"], symmetries=8,  # (the DTs on turned maps)
              seeds=[0], method_seeds={"gru": [0, 2], "options": [7]})  # (options: not run here, ignored)
-    dataset = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
     for method in g["methods"] + g["baselines"]:
-        runs = stages.plan_unseen(validate(params), method, dataset)
+        runs = plan_unseen(validate(params), method, dataset)
         assert [r.seed for r in runs] == ([0, 2] if method == "gru" else [0])
         for run in runs:
             model, facts, _ = train_run(run)
             assert type(model).__name__.startswith("View")
             save_checkpoint(model, tmp_path / "models" / method / f"seed{run.seed}", {"method": method, **facts})
-    table = stages.evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1),
+    table = evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1),
                                    progress=False)
     assert set(table.method) == {"hnsdt", "gru", "dqn", "symbolic"}
     assert set(table.split) == {"train", "heldout", "minigrid", "drawn"}
@@ -568,7 +571,7 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     summary = pd.read_csv(tmp_path / "results/summary.csv")
     assert len(summary) == 4 * 4 * 2 and summary.success_mean.between(0, 1).all()
     assert summary.groupby("method").seeds.max().to_dict() == {"hnsdt": 1, "gru": 2, "dqn": 1, "symbolic": 1}
-    from hnsdt.evaluation.report import trained_seeds
+    from hnsdt.report.common import trained_seeds
 
     assert trained_seeds(summary) == "2 seeds for GRU sequential, 1 for the others"
     # where the plan-followers' steps go: one row per sub-goal pursued, on every split; the controllers walk
@@ -581,12 +584,12 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     assert len(walks) and (walks.steps == walks.optimal_steps).all() and (walks.right_actions == walks.steps).all()
     # one split and method alone (`--splits drawn --methods gru`: a user's maps without the rest) have the
     # episodes they have among all, beside the reference's
-    alone = stages.evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "alone", Compute(workers=1),
+    alone = evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "alone", Compute(workers=1),
                                    progress=False, splits=["drawn"], methods=["gru"])
     assert alone.equals(table[(table.split == "drawn") & table.method.isin(["gru", "symbolic"])].reset_index(drop=True))
     with pytest.raises(ValueError, match=r"^--methods: options not learned here \(the experiment's: hnsdt, gru, "
                                          r"dqn\)$"):
-        stages.evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "none", methods=["options"])
+        evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "none", methods=["options"])
     (tmp_path / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     out = hnsdt_cli("generalisation", "evaluate", "--models", tmp_path / "models", "--splits", "drawn", "nope",
                     "--out", "res", cwd=tmp_path)
@@ -595,7 +598,7 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     assert not (tmp_path / "res").exists()
     # any evaluated episode is made again from its checkpoint and seeds and recorded (`generalisation replay`),
     # checked against its row: the reference's every episode (their steps differ at fail_prob 0.2), one each else
-    from hnsdt.evaluation.evaluate import layout_episode_id
+    from hnsdt.evaluation.layouts import layout_episode_id
 
     ids = [layout_episode_id(*key) for key in zip(table.method, table.seed, table.layout, table.fail_prob,
                                                   table.episode)]
@@ -604,7 +607,7 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
         "dqn/seed0/" + table.layout.iloc[-1] + "/fp0.2/ep0"]
     assert len(set(table[table.method == "symbolic"].steps)) > 1
     for episode_id in chosen:
-        row, files = stages.replay_unseen(validate(params), tmp_path / "models", tmp_path / "results", episode_id)
+        row, files = replay_unseen(validate(params), tmp_path / "models", tmp_path / "results", episode_id)
         assert files[".mcap"].startswith(b"\x89MCAP") and files[".rrd"], episode_id
     out = hnsdt_cli("generalisation", "replay", "--episode", chosen[-1], "--models", tmp_path / "models",
                     "--results", tmp_path / "results", "--out", tmp_path / "ep.rrd", cwd=tmp_path)
@@ -614,7 +617,7 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
                     tmp_path / "models", "--results", tmp_path / "results", cwd=tmp_path)
     assert out.returncode == 2 and out.stderr.startswith("hnsdt: error: no episode 'hnsdt/seed0/nowhere/fp0/ep0'")
     with pytest.raises(ValueError, match="not in generalisation.methods"):
-        stages.plan_unseen(validate(params), "options", dataset)
+        plan_unseen(validate(params), "options", dataset)
 
 
 def test_a_bad_generalisation_knob_is_one_line_naming_it(tmp_path):
@@ -632,7 +635,7 @@ def test_a_bad_generalisation_knob_is_one_line_naming_it(tmp_path):
 
 
 def test_a_methods_budget_replaces_the_protocols_knobs_and_a_bad_one_is_named(tmp_path):
-    from hnsdt.core.config import ParamsError
+    from hnsdt.compose.config import ParamsError
 
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"]["budgets"] = {"gru": {"epochs": 3, "lr": 1}, "dqn": {"env_steps": 123}}
@@ -665,25 +668,25 @@ def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operator
     from hnsdt.core.compute import Compute
     from hnsdt.models.checkpoint import save_checkpoint
     from hnsdt.symbolic.subgoals import NAME_TO_ID
-    from hnsdt.training import train_run
+    from hnsdt.compose.training import train_run
 
     params = _tiny_generalisation_params(tmp_path)
     g = params["generalisation"]
     g.update(methods=["hnsdt_paper"], baselines=[])
-    planner_only = stages.collect_unseen(validate(params), tmp_path / "planner", progress=False, provenance={})
+    planner_only = collect_unseen(validate(params), tmp_path / "planner", progress=False, provenance={})
     no_walks = r"hnsdt_paper learns from \['random'\] episodes and .*generalisation\.random_episodes_per_layout"
     with pytest.raises(ValueError, match=no_walks):
-        stages.plan_unseen(validate(params), "hnsdt_paper", planner_only)
+        plan_unseen(validate(params), "hnsdt_paper", planner_only)
     g["random_episodes_per_layout"] = 2
-    dataset = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
-    (run,) = stages.plan_unseen(validate(params), "hnsdt_paper", dataset)
+    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    (run,) = plan_unseen(validate(params), "hnsdt_paper", dataset)
     frames = run.data
     walks = frames.policy == "random"
     assert walks.sum() > 0 and (~walks).sum() > 0
     assert NAME_TO_ID["Move"] in set(frames.subgoals[walks].tolist())  # the paper's labels, not GoTo
     model, facts, _ = train_run(run)
     save_checkpoint(model, tmp_path / "models/hnsdt_paper/seed0", {"method": "hnsdt_paper", **facts})
-    table = stages.evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1),
+    table = evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "results", Compute(workers=1),
                                    progress=False)
     assert set(table.method) == {"hnsdt_paper", "symbolic"}
     assert set(table.split) == {"train", "heldout", "minigrid", "drawn"}
@@ -694,7 +697,7 @@ def test_our_arm_plans_over_the_experiments_operators_and_learns_their_labels(tm
     from the collected episodes' labels of that set (Move: in hindsight, one per change of cell) and is given its
     sub-goals, as are the LSTM's labels and the symbolic reference; the paper's arm keeps its own planner, and
     without the knob our arm plans as on the paper's maps (`planner`)."""
-    from hnsdt.core.config import layout_executor, method_executor
+    from hnsdt.compose.config import layout_executor, method_executor
     from hnsdt.symbolic.subgoals import NAME_TO_ID
 
     params = _tiny_generalisation_params(tmp_path)
@@ -704,12 +707,12 @@ def test_our_arm_plans_over_the_experiments_operators_and_learns_their_labels(tm
         executor = layout_executor(validate(params), method)
         assert (executor.operators, executor.plan_mode) == ("move", params["planner"]["mode"])
     assert layout_executor(validate(params), "hnsdt_paper") == method_executor(validate(params), "hnsdt_paper")
-    dataset = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
     labels = {}
     for operators in ("move", None):
         g["operators"] = operators
         for method in ("hnsdt", "lstm_hier"):
-            (run,) = stages.plan_unseen(validate(params), method, dataset)
+            (run,) = plan_unseen(validate(params), method, dataset)
             labels[operators, method] = set(run.data.subgoals.tolist())
     goto = {i for name, i in NAME_TO_ID.items() if name.startswith("GoTo")}
     for method in ("hnsdt", "lstm_hier"):
@@ -725,8 +728,8 @@ def test_no_two_splits_share_a_map_and_validation_is_never_evaluated():
     """The default experiment's training, validation, held-out, MiniGrid and hand-drawn maps are pairwise
     distinct grids, and the four maps drawn after every choice (``layouts/drawn_later``) are none of them; a generated
     grid already in an earlier split is skipped, not reused."""
-    from hnsdt import generalisation as gen
-    from hnsdt.core.config import load_params
+    from hnsdt.compose import generalisation as gen
+    from hnsdt.compose.config import load_params
     from hnsdt.envs.generate import generate
 
     params = load_params(REPO / "params.yaml", [f"generalisation.drawn.folder={REPO / 'layouts/drawn'}"])
@@ -748,10 +751,10 @@ def test_no_two_splits_share_a_map_and_validation_is_never_evaluated():
 def test_a_validation_split_of_several_families():
     """``generalisation.validation_families``: ``validation_layouts`` maps of each listed family (its own
     validation seeds), none a training or held-out grid; a family whose flags differ is one clear error."""
-    from hnsdt import generalisation as gen
-    from hnsdt.core.config import load_params
+    from hnsdt.compose import generalisation as gen
+    from hnsdt.compose.config import load_params
     from hnsdt.envs.generate import generate
-    from hnsdt.core.params import ParamsError
+    from hnsdt.compose.params import ParamsError
 
     families = ["keydoor", "keydoor_maze", "keydoor_obstacles"]
     params = load_params(REPO / "params.yaml", [f"generalisation.validation_families={families}",
@@ -793,23 +796,23 @@ def test_no_network_depends_on_the_maps_it_is_evaluated_on(tmp_path):
 def test_the_dts_budget_is_chosen_on_the_validation_layouts(tmp_path):
     """A DT with a ``train.validation`` entry trains on every training episode and stops at the plateau of its
     steps to the exit from the validation layouts' start (and random) states; a baseline keeps its budget."""
-    from hnsdt import generalisation as gen
+    from hnsdt.compose import generalisation as gen
 
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"].update(methods=["hnsdt"], baselines=["gru"], validation_layouts=2)
     params["train"]["validation"]["hnsdt"].update(starts=12, max_epochs=4)
-    dataset = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
-    (run,) = stages.plan_unseen(validate(params), "hnsdt", dataset)
+    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    (run,) = plan_unseen(validate(params), "hnsdt", dataset)
     validation = gen.validation_layouts(validate(params))
     assert run.train_cfg.validation == 0.0 and run.train_cfg.epochs == 4
     assert [c.layout for c in run.measure.courses] == [s.layout for s in validation]
     assert len(validation) == 2 * len(params["generalisation"]["validation_families"]) == 6  # 2 of each family
     for course, src in zip(run.measure.courses, validation):  # the 12 starts spread: the start and a random one
         assert len(course.starts) == 2 and (course.starts[0, :2] == src.layout.start).all()
-    (baseline,) = stages.plan_unseen(validate(params), "gru", dataset)
+    (baseline,) = plan_unseen(validate(params), "gru", dataset)
     assert baseline.measure is None
     params["generalisation"]["validation_layouts"] = 0  # the paper protocol's budget
-    (run,) = stages.plan_unseen(validate(params), "hnsdt", dataset)
+    (run,) = plan_unseen(validate(params), "hnsdt", dataset)
     assert run.measure is None and run.train_cfg.validation == params["train"]["validation"]["hnsdt"]["share"]
 
 
@@ -818,15 +821,15 @@ def test_an_offline_baselines_patience_stops_it_on_the_validation_layouts(tmp_pa
     validation layouts after every epoch, stops once they have not improved for ``patience`` epochs (``epochs``
     the cap) and keeps the best epoch's weights, whose measure is the history's best. Without validation
     layouts, or set for the paper protocol (which has none), patience is one line naming the knob."""
-    from hnsdt import generalisation as gen
-    from hnsdt.core.config import ParamsError
-    from hnsdt.training import plan_runs, train_run
+    from hnsdt.compose import generalisation as gen
+    from hnsdt.compose.config import ParamsError
+    from hnsdt.compose.training import plan_runs, train_run
 
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"].update(methods=["hnsdt"], baselines=["lstm_hier"], validation_layouts=1,
                                     budgets={"lstm_hier": {"epochs": 6, "patience": 1, "starts": 6}})
-    dataset = stages.collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
-    (run,) = stages.plan_unseen(validate(params), "lstm_hier", dataset)
+    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    (run,) = plan_unseen(validate(params), "lstm_hier", dataset)
     assert [c.layout for c in run.measure.courses] == [s.layout for s in gen.validation_layouts(validate(params))]
     model, facts, _ = train_run(run)
     usage = facts["usage"]
@@ -837,7 +840,7 @@ def test_an_offline_baselines_patience_stops_it_on_the_validation_layouts(tmp_pa
     assert run.measure(model) == history[best]  # the kept weights are the best epoch's
     params["generalisation"]["validation_layouts"] = 0
     with pytest.raises(ParamsError, match=r"generalisation.budgets.lstm_hier.patience .*validation_layouts > 0"):
-        stages.plan_unseen(validate(params), "lstm_hier", dataset)
+        plan_unseen(validate(params), "lstm_hier", dataset)
     params["baselines"]["lstm_hier"]["patience"] = 2
     params["baselines"]["offline"] = ["lstm_hier"]
     with pytest.raises(ParamsError, match=r"baselines.lstm_hier.patience stops on validation layouts"):
@@ -847,8 +850,8 @@ def test_an_offline_baselines_patience_stops_it_on_the_validation_layouts(tmp_pa
 def test_a_further_experiment_is_a_params_block_of_the_keys_it_changes(tmp_path):
     """``unseen_experiments.<name>``: the `generalisation` section with that block's keys changed is what every
     stage of the experiment reads (the section itself unchanged); a bad key, value or name is one line naming it."""
-    from hnsdt import generalisation as gen
-    from hnsdt.core.config import ParamsError, unseen_experiment
+    from hnsdt.compose import generalisation as gen
+    from hnsdt.compose.config import ParamsError, unseen_experiment
 
     params = _tiny_generalisation_params(tmp_path)
     params["unseen_experiments"] = {"two_keys": {"family": "multikeydoor", "max_steps": 250, "minigrid": [],
@@ -893,7 +896,7 @@ def test_a_further_experiment_is_a_params_block_of_the_keys_it_changes(tmp_path)
 
 
 def test_a_folder_of_drawn_maps_is_checked_with_one_line_naming_the_problem(tmp_path):
-    from hnsdt import generalisation as gen
+    from hnsdt.compose import generalisation as gen
     from hnsdt.cli import main
 
     params = _tiny_generalisation_params(tmp_path)
@@ -916,7 +919,7 @@ def test_a_folder_of_drawn_maps_is_checked_with_one_line_naming_the_problem(tmp_
 def test_the_report_says_per_unseen_split_whether_hnsdt_meets_the_target_and_by_how_much():
     import pandas as pd
 
-    from hnsdt.evaluation.report import target_lines
+    from hnsdt.report.unseen import target_lines
 
     rows = [("hnsdt", "train", 0.0, 0.5, 3.0), ("hnsdt", "heldout", 0.0, 0.99, 1.05), ("hnsdt", "heldout", 0.3, 0.96, 1.08),
             ("hnsdt", "drawn", 0.0, 1.0, 1.02), ("hnsdt", "drawn", 0.3, 0.90, 1.30), ("gru", "drawn", 0.0, 0.0, None),
@@ -934,7 +937,7 @@ def test_the_report_says_per_unseen_split_whether_hnsdt_meets_the_target_and_by_
 def test_the_report_shows_each_hand_drawn_map():
     import pandas as pd
 
-    from hnsdt.evaluation.report import drawn_lines
+    from hnsdt.report.unseen import drawn_lines
 
     rows = [("hnsdt", "drawn", "layouts/drawn/spiral_9x9.txt", True, 40, 37.0),
             ("hnsdt", "drawn", "layouts/drawn/spiral_9x9.txt", False, 250, 37.0),
@@ -1071,8 +1074,9 @@ def test_a_splits_maps_stepped_as_one_batch_are_each_map_run_alone(method):
     import torch
 
     from hnsdt.agents.executor import ExecutorConfig
-    from hnsdt.evaluation.evaluate import Batch, EvalTask, layout_batches, layout_rows, run_batch
-    from hnsdt.generalisation import Source
+    from hnsdt.evaluation.runs import Batch, EvalTask, run_batch
+    from hnsdt.evaluation.layouts import layout_batches, layout_rows
+    from hnsdt.compose.generalisation import Source
     from hnsdt.models.view import ViewDecisionTransformer, ViewOptionCritic, ViewOptionCriticConfig, view_config
 
     layouts = [generate("keydoor_maze", s) for s in (3, 4)] + [generate("keydoor", 5)]
@@ -1104,7 +1108,7 @@ def test_the_validation_measure_acts_on_its_maps_side_by_side():
     """StepsToExit steps its validation maps as one batch (as many starts each): the mean of each map run alone
     (here with the planner's own controllers, whose steps differ from map to map)."""
     from hnsdt.agents.executor import ExecutorConfig
-    from hnsdt.training import StepsToExit
+    from hnsdt.compose.training import StepsToExit
 
     layouts = [generate("keydoor_maze", s) for s in (3, 4)] + [generate("keydoor", 5)]
     measure = StepsToExit.on_layouts(layouts, 60, 6, "symbolic", ExecutorConfig(), {})

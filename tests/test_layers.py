@@ -10,8 +10,8 @@ from conftest import REPO
 
 PACKAGE = Path(REPO) / "hnsdt"
 LOWER = ("hnsdt.envs", "hnsdt.symbolic", "hnsdt.models", "hnsdt.agents")
-UPPER = ("hnsdt.data", "hnsdt.evaluation", "hnsdt.logs", "hnsdt.generalisation", "hnsdt.training",
-         "hnsdt.core.config", "hnsdt.cli")
+UPPER = ("hnsdt.data", "hnsdt.evaluation", "hnsdt.logs", "hnsdt.compose.generalisation", "hnsdt.compose.training",
+         "hnsdt.compose.config", "hnsdt.cli")
 
 
 def module_name(path: Path) -> str:

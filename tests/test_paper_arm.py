@@ -74,7 +74,8 @@ def test_symbolic_controllers_execute_move_plans_optimally(name):
 def test_the_decomposition_judges_each_action(keydoor, operators):
     """The controllers' every action is right (first ones included) and every segment is reached in its
     minimum; an action swapped for a wrong one is counted wrong at that step and nowhere else."""
-    from hnsdt.evaluation.evaluate import Cell, layout_navigator, right_actions, segment_rows
+    from hnsdt.evaluation.paper import Cell, segment_rows
+    from hnsdt.evaluation.segments import layout_navigator, right_actions
 
     config = MOVE if operators == "move" else ExecutorConfig()
     (ep,) = rollout(KeyDoorVectorEnv(1, keydoor, 0.0, 100), SymbolicAgent(keydoor, config), seed=0)
@@ -160,9 +161,9 @@ def test_the_achieving_step_loss_counts_only_the_actions_that_achieved_their_sub
 def test_the_steps_measure_acts_from_held_out_states_and_keys_the_record(keydoor):
     """``measure: steps``: distinct held-out states the planner can solve, the method's own agent on them at
     fail_prob 0, the same value on every call; training records it as ``validation_steps``."""
-    from hnsdt.core.config import EnvSpec
+    from hnsdt.compose.config import EnvSpec
     from hnsdt.models.train import train_decision_transformer, validation_episodes
-    from hnsdt.training import StepsToExit
+    from hnsdt.compose.training import StepsToExit
 
     frames, _ = _random_walk_frames(keydoor, 12)
     held = validation_episodes(frames, 0.25)

@@ -172,9 +172,9 @@ def test_an_episode_made_again_is_the_evaluated_one_to_the_bit(repo_copy):
     state, action, sub-goal and reward; the .rrd files carry time-based row ids)."""
     import contextlib
 
-    from hnsdt.core.config import env_spec, evaluate_settings, executor_config, load_params
+    from hnsdt.compose.config import env_spec, evaluate_settings, executor_config, load_params
     from hnsdt.core.methods import ARMS
-    from hnsdt.evaluation.evaluate import Cell, rerun_episode
+    from hnsdt.evaluation.paper import Cell, rerun_episode
 
     with contextlib.chdir(repo_copy):  # (the params' layout paths are the repo's)
         params = load_params("params.yaml")

@@ -56,9 +56,9 @@ def test_every_entry_resolves_to_its_code(name):
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
     """Params at a tiny budget and a small Case 1 dataset (random walks cover every operator, Move included)."""
-    from hnsdt.core.config import collect_config, load_params
+    from hnsdt.compose.config import collect_config, load_params
     from hnsdt.data.collect import collect_dataset
-    from hnsdt.core.params import validate
+    from hnsdt.compose.params import validate
 
     params = copy.deepcopy(load_params(PACKAGE.parent / "params.yaml").raw)
     params["collect"]["fail_probs"] = [0.1]
@@ -81,10 +81,11 @@ def test_every_method_trains_and_acts_through_its_registry_entry(tiny, name):
     architecture and agent, then a batch of evaluation episodes. (Whether it learns is tested elsewhere.)"""
     import json
 
-    from hnsdt.core.config import env_spec, method_executor
-    from hnsdt.evaluation.evaluate import Cell, build_agent, run_cell
+    from hnsdt.compose.config import env_spec, method_executor
+    from hnsdt.evaluation.paper import Cell, run_cell
+    from hnsdt.evaluation.runs import build_agent
     from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint
-    from hnsdt.training import plan_runs, train_run
+    from hnsdt.compose.training import plan_runs, train_run
 
     params, dataset = tiny
     env = env_spec(params, "keydoor")
@@ -107,7 +108,7 @@ def test_the_train_stage_declares_every_training_knob_it_reads():
     would not rerun training when changed (train.formulation and train.validation once were missing)."""
     import yaml
 
-    from hnsdt.core.params import TrainParams
+    from hnsdt.compose.params import TrainParams
 
     stage = yaml.safe_load((Path(__file__).parents[1] / "dvc.yaml").read_text())["stages"]["train"]
     declared = set(stage["params"])
@@ -122,7 +123,7 @@ def test_the_unseen_layout_transformers_declare_the_train_knobs_they_read_and_no
     retrain them."""
     import yaml
 
-    from hnsdt.core.params import TrainParams
+    from hnsdt.compose.params import TrainParams
 
     stage = yaml.safe_load((Path(__file__).parents[1] / "dvc.yaml").read_text())["stages"][name]["do"]
     declared = {p for p in stage["params"] if isinstance(p, str)}

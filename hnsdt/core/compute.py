@@ -6,7 +6,7 @@ and touches no file. The caller writes every output. Each task sets its own torc
 results come back in task order, so the outputs are the same bytes whichever executor runs the tasks and
 however many workers share them (tested). A task may also return :class:`Continue` — the rest of its work
 as a new task — which goes to the back of the queue: a training seed hands back its state part-way
-(:func:`hnsdt.training.pause_at`), so that 5 seeds on 2 workers take about 2.5 seed-times instead of 3.
+(:func:`hnsdt.compose.training.pause_at`), so that 5 seeds on 2 workers take about 2.5 seed-times instead of 3.
 
 * ``local`` (default): a pool of ``workers`` spawned processes (0 = one per core / threads); one worker runs
   the tasks in this process, each task and result through the same plain pickles as a pool's (so a task that

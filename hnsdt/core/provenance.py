@@ -25,5 +25,5 @@ def git_revision(cwd: str | Path = ".") -> str:
 
 
 def params_digest(params) -> str:
-    """16 hex digits of the canonical JSON of the params file as written (:attr:`hnsdt.core.params.Params.raw`)."""
+    """16 hex digits of the canonical JSON of the params file as written (:attr:`hnsdt.compose.params.Params.raw`)."""
     return hashlib.sha256(json.dumps(params.raw, sort_keys=True).encode()).hexdigest()[:16]

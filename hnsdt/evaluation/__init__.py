@@ -1,1 +1,2 @@
-"""Evaluation of every method x env x fail_prob x seed (evaluate), the theorem checks and the report."""
+"""Evaluation of every method × layout × fail_prob × seed against the exact optimum, the ablation table, and
+the checks of the paper's two theorems."""

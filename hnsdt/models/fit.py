@@ -5,7 +5,7 @@ capped at a number of gradient steps, or stopped at the plateau of a validation 
 A run can stop after any complete epoch and hand back a
 :class:`FitState` — weights, optimiser moments, both random streams, counters — from which :func:`fit`
 continues, in this process or another, to the same bytes as an uninterrupted run (tested). The training
-stages use this to run seeds that share workers in parts (:func:`hnsdt.training.pause_at`), so that 5 seeds
+stages use this to run seeds that share workers in parts (:func:`hnsdt.compose.training.pause_at`), so that 5 seeds
 keep 2 workers busy for about 2.5 seed-times instead of 3.
 """
 

@@ -16,7 +16,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hnsdt.core.config import (EnvSpec, Params, baseline_settings, env_spec, fill, layout_executor, method_executor,
+from hnsdt.compose.config import (EnvSpec, Params, baseline_settings, env_spec, fill, layout_executor, method_executor,
                                model_config, train_settings)
 from hnsdt.envs.layout import Layout
 from hnsdt.core.methods import METHODS, network_for, resolve

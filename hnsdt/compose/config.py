@@ -1,8 +1,8 @@
 """params.yaml -> the library's typed settings.
 
-The schema of the file (every knob's type, range, default and meaning) is :mod:`hnsdt.core.params`. This module
+The schema of the file (every knob's type, range, default and meaning) is :mod:`hnsdt.compose.params`. This module
 loads a params file and validates it there once (bad input stops with one line naming the file and the key):
-:func:`load_params` returns the :class:`~hnsdt.core.params.Params` model that every stage takes, and the functions
+:func:`load_params` returns the :class:`~hnsdt.compose.params.Params` model that every stage takes, and the functions
 below turn its sections into the frozen settings each stage runs with (an :class:`EnvSpec`, the planner's
 :class:`~hnsdt.agents.executor.ExecutorConfig`, :class:`TrainSettings`, :class:`BaselineSettings`,
 :class:`EvaluateSettings`). Nothing below the command line reads a params mapping.
@@ -19,7 +19,7 @@ import yaml
 
 from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.core.methods import BASELINES, DT_METHODS, METHODS, PROPOSED, resolve
-from hnsdt.core.params import SECTIONS, Params, ParamsError, validate
+from hnsdt.compose.params import SECTIONS, Params, ParamsError, validate
 from hnsdt.data.collect import POLICIES, Behaviour, CollectConfig
 from hnsdt.envs import ENV_IDS, LayoutError, load_layout
 from hnsdt.envs.layout import Layout
@@ -115,7 +115,7 @@ def layout_executor(params: Params, method: str) -> ExecutorConfig:
 def unseen_experiment(params: Params, name: str | None) -> Params:
     """``params`` as the unseen-layout experiment ``name`` of ``unseen_experiments`` sees them: its changes in
     the ``generalisation`` section (None: the section as it is), so every stage of that experiment runs on it."""
-    from hnsdt.core.params import merged_experiment
+    from hnsdt.compose.params import merged_experiment
 
     if name is None:
         return params

@@ -1,10 +1,10 @@
 """The schema of ``params.yaml``: every knob's type, range, default and meaning, in one place.
 
 :func:`validate` checks a whole params file against it before any work starts: an unknown key, a wrong type or
-an out-of-range value stops with one line naming the key. :mod:`hnsdt.core.config` turns the validated sections into
+an out-of-range value stops with one line naming the key. :mod:`hnsdt.compose.config` turns the validated sections into
 the library's configs. The learned baselines' own knobs (``baselines.<method>``) are the training and network
 config dataclasses their registry entries name (:mod:`hnsdt.core.methods`), checked by
-:func:`hnsdt.core.config.baseline_settings`.
+:func:`hnsdt.compose.config.baseline_settings`.
 """
 
 from __future__ import annotations
@@ -122,7 +122,7 @@ class TrainParams(Section):
 
 class BaselinesParams(BaseModel):
     """``offline`` / ``online``: which baselines train; ``<method>``: that method's knobs (its config
-    dataclasses, checked by :func:`hnsdt.core.config.baseline_settings`)."""
+    dataclasses, checked by :func:`hnsdt.compose.config.baseline_settings`)."""
 
     model_config = ConfigDict(extra="allow", strict=True, frozen=True)
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from hnsdt.core.config import Params
+from hnsdt.compose.config import Params
 from hnsdt.envs.generate import check_usable, generate
 from hnsdt.envs.layout import Layout, load_layout
 
