@@ -107,7 +107,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         t0 = time.perf_counter()
-        dataset = collect_unseen(params, tmp / "dataset", progress=False, provenance={})
+        dataset = collect_unseen(params, tmp / "dataset", progress=False)
         times["collect"] = time.perf_counter() - t0
         for method in g["methods"] + g["baselines"]:
             t0 = time.perf_counter()

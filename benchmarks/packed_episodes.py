@@ -48,7 +48,7 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=2)
     args = parser.parse_args()
 
-    from hnsdt import training
+    from hnsdt.compose import training
     from hnsdt.compose.config import load_params
     from hnsdt.models.dt import DecisionTransformer
     from hnsdt.models.fit import to_device

@@ -39,7 +39,8 @@ def main() -> None:
     parser.add_argument("--costs", type=float, nargs=2, metavar=("STEP", "GROUP"))
     args = parser.parse_args()
 
-    from hnsdt import training
+    from hnsdt.compose import training
+    from hnsdt.implementations import network_for
     from hnsdt.baselines.recurrent import episode_batch, training_episodes
     from hnsdt.stages.train_unseen import plan_unseen
     from hnsdt.compose.config import load_params
@@ -66,7 +67,7 @@ def main() -> None:
             batches = [to_device(episode_batch(task.data, starts[r], lengths[r]), torch.device("cpu")) for r in rows]
             padded_steps = sum(b["mask"].numel() for b in batches) / sum(int(b["mask"].sum()) for b in batches)
             torch.manual_seed(0)
-            model = training.network_for(method, task.model_cfg)(task.model_cfg).train()
+            model = network_for(method, task.model_cfg)(task.model_cfg).train()
             with torch.no_grad():
                 diff = max(abs(float(model.loss(b)) - float(padded_loss(model, b))) for b in batches)
             padded, grouped = fastest_ms(model, args.rounds, (batches, lambda b: padded_loss(model, b)),

@@ -64,3 +64,17 @@ def test_unknown_behaviour_policy(tmp_path):
 def test_unknown_env_name():
     out = hnsdt_cli("plan", "--env", "nowhere")
     assert out.returncode == 2 and "unknown env 'nowhere'" in out.stderr
+
+
+def test_the_debug_switch_shows_the_traceback_behind_the_one_line(tmp_path, monkeypatch):
+    params = tmp_path / "params.yaml"
+    params.write_text(BAD_PARAMS[3][0])
+    args = ("--params", str(params), "collect", "--env", "keydoor", "--out", str(tmp_path / "out"))
+    monkeypatch.delenv("HNSDT_DEBUG", raising=False)
+    quiet = hnsdt_cli(*args)
+    monkeypatch.setenv("HNSDT_DEBUG", "1")
+    loud = hnsdt_cli(*args)
+    assert quiet.returncode == loud.returncode == 2 and "Traceback" not in quiet.stderr
+    first, *rest = loud.stderr.splitlines()
+    assert first == quiet.stderr.strip() and rest[0].startswith("Traceback") and "ParamsError" in rest[-1]
+    assert not (tmp_path / "out").exists()

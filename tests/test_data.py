@@ -46,6 +46,20 @@ def small_dataset(tmp_path_factory, multikeydoor):
     return root
 
 
+def test_the_same_collection_gives_the_same_bytes_naming_no_revision(small_dataset, multikeydoor, tmp_path):
+    """A dataset's files are the same bytes on every run of the same collection: nothing in them names the code
+    revision or the run (the revision lives in dvc.lock and the report), so a rerun changes no downstream hash."""
+    from hnsdt.core.provenance import git_revision
+
+    again = tmp_path / "multi"
+    collect_dataset(_small_config(multikeydoor), again, "local/multi", progress=False)
+    files = sorted(p.relative_to(small_dataset) for p in small_dataset.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(again) for p in again.rglob("*") if p.is_file())
+    assert [f for f in files if (small_dataset / f).read_bytes() != (again / f).read_bytes()] == []
+    revision = git_revision().removesuffix("-dirty").encode()
+    assert [f for f in files if revision in (small_dataset / f).read_bytes()] == []
+
+
 def test_training_reads_the_frames_stock_lerobot_loads(small_dataset):
     """hnsdt.data.format.frame_columns (pyarrow, no lerobot import) gives every frame column exactly as the
     Arrow table of stock LeRobotDataset: the same values, dtypes and order."""
@@ -196,7 +210,7 @@ def test_the_card_follows_the_hub_and_lerobot_conventions(small_dataset):
     assert set(info["features"]) - {"timestamp", "frame_index", "episode_index", "index", "task_index"} <= documented
     assert all(f"| `{name}` |" in text for name in documented & (set(info["features"]) | {"task"}))
     assert "| `observation.image` |" not in text  # not rendered: not described
-    assert BIBTEX in text and data_md5(small_dataset) in text and "params digest" in text
+    assert BIBTEX in text and data_md5(small_dataset) in text and "name no code revision" in text
     meta = json.loads((small_dataset / "meta/hnsdt.json").read_text())
     assert meta["data_md5"] == data_md5(small_dataset) and meta["card"]["license"] == "apache-2.0"
 

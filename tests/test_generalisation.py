@@ -240,7 +240,7 @@ def test_the_lstm_and_gru_read_the_decision_transformers_view_encoder(tmp_path):
     get the same convolutions as the decision transformers' (the online learners keep their one-hot MLP)."""
     import torch
 
-    from hnsdt.core.methods import METHODS, resolve
+    from hnsdt.implementations import code_of, resolve
 
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"].update(conv_layers=2)
@@ -248,7 +248,7 @@ def test_the_lstm_and_gru_read_the_decision_transformers_view_encoder(tmp_path):
     for method in ("lstm_hier", "gru"):
         cfg, _ = network_configs(validate(params), method, 0)
         assert cfg.conv_layers == dt.conv_layers == 2
-        model = resolve(METHODS[method].view_network)(cfg)
+        model = resolve(code_of(method).view_network)(cfg)
         assert len([m for m in model.view.convs if isinstance(m, torch.nn.Conv2d)]) == 2
 
 
@@ -436,11 +436,12 @@ def _tiny_generalisation_params(tmp_path) -> dict:
 
 def _view_network(name: str, radius: int):
     """The registry's view network of ``name`` at a tiny size."""
-    from hnsdt.core.methods import METHODS, resolve
+    from hnsdt.core.methods import METHODS
+    from hnsdt.implementations import code_of, resolve
     from hnsdt.models.view import view_config
 
     entry = METHODS[name]
-    cls = resolve(entry.view_network)
+    cls = resolve(code_of(name).view_network)
     if entry.stage == "train":
         return cls(view_config(entry.condition, 2, radius, 9, context=3, n_layers=1, n_heads=2, d_model=16,
                                max_timestep=50))
@@ -520,8 +521,7 @@ def test_the_dataset_over_generated_layouts_stores_each_frames_view(tmp_path):
     from hnsdt.models.view import view_states
 
     params = _tiny_generalisation_params(tmp_path)
-    root = collect_unseen(validate(params), tmp_path / "ds", progress=False,
-                                provenance={"git_revision": "test"})
+    root = collect_unseen(validate(params), tmp_path / "ds", progress=False)
     ds = open_dataset(root)
     cols = ds.hf_dataset.with_format("numpy")[:]
     layouts = [s.layout for s in gen.layout_splits(validate(params)) if s.split == "train"]
@@ -552,7 +552,7 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     g = params["generalisation"]
     g.update(methods=["hnsdt"], baselines=["gru", "dqn"], symmetries=8,  # (the DTs on turned maps)
              seeds=[0], method_seeds={"gru": [0, 2], "options": [7]})  # (options: not run here, ignored)
-    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False)
     for method in g["methods"] + g["baselines"]:
         runs = plan_unseen(validate(params), method, dataset)
         assert [r.seed for r in runs] == ([0, 2] if method == "gru" else [0])
@@ -673,12 +673,12 @@ def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operator
     params = _tiny_generalisation_params(tmp_path)
     g = params["generalisation"]
     g.update(methods=["hnsdt_paper"], baselines=[])
-    planner_only = collect_unseen(validate(params), tmp_path / "planner", progress=False, provenance={})
+    planner_only = collect_unseen(validate(params), tmp_path / "planner", progress=False)
     no_walks = r"hnsdt_paper learns from \['random'\] episodes and .*generalisation\.random_episodes_per_layout"
     with pytest.raises(ValueError, match=no_walks):
         plan_unseen(validate(params), "hnsdt_paper", planner_only)
     g["random_episodes_per_layout"] = 2
-    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False)
     (run,) = plan_unseen(validate(params), "hnsdt_paper", dataset)
     frames = run.data
     walks = frames.policy == "random"
@@ -707,7 +707,7 @@ def test_our_arm_plans_over_the_experiments_operators_and_learns_their_labels(tm
         executor = layout_executor(validate(params), method)
         assert (executor.operators, executor.plan_mode) == ("move", params["planner"]["mode"])
     assert layout_executor(validate(params), "hnsdt_paper") == method_executor(validate(params), "hnsdt_paper")
-    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False)
     labels = {}
     for operators in ("move", None):
         g["operators"] = operators
@@ -801,7 +801,7 @@ def test_the_dts_budget_is_chosen_on_the_validation_layouts(tmp_path):
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"].update(methods=["hnsdt"], baselines=["gru"], validation_layouts=2)
     params["train"]["validation"]["hnsdt"].update(starts=12, max_epochs=4)
-    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False)
     (run,) = plan_unseen(validate(params), "hnsdt", dataset)
     validation = gen.validation_layouts(validate(params))
     assert run.train_cfg.validation == 0.0 and run.train_cfg.epochs == 4
@@ -828,7 +828,7 @@ def test_an_offline_baselines_patience_stops_it_on_the_validation_layouts(tmp_pa
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"].update(methods=["hnsdt"], baselines=["lstm_hier"], validation_layouts=1,
                                     budgets={"lstm_hier": {"epochs": 6, "patience": 1, "starts": 6}})
-    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False, provenance={})
+    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False)
     (run,) = plan_unseen(validate(params), "lstm_hier", dataset)
     assert [c.layout for c in run.measure.courses] == [s.layout for s in gen.validation_layouts(validate(params))]
     model, facts, _ = train_run(run)

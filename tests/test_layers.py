@@ -1,17 +1,32 @@
-"""Imports run one way: the world (envs, symbolic), the networks (models) and the policies (agents) never import
-the data layer, the evaluation or the experiments' wiring, and no two modules import each other in a circle."""
+"""Imports run one way: the package is a stack of layers, and a module imports only its own layer and those below
+it — at the top of a file, inside a function, or by a ``"module:attribute"`` string that is imported later (the
+implementations table). No two modules import each other in a circle.
+
+The package root (``hnsdt/__init__.py``) stands outside the stack: it registers the environments' gymnasium ids,
+so that ``import hnsdt`` is enough for ``gymnasium.make``."""
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
 
 from conftest import REPO
 
 PACKAGE = Path(REPO) / "hnsdt"
-LOWER = ("hnsdt.envs", "hnsdt.symbolic", "hnsdt.models", "hnsdt.agents")
-UPPER = ("hnsdt.data", "hnsdt.evaluation", "hnsdt.logs", "hnsdt.compose.generalisation", "hnsdt.compose.training",
-         "hnsdt.compose.config", "hnsdt.cli")
+LAYERS = (  # bottom to top
+    ("ground", ("hnsdt.core",)),  # file I/O, reproducibility, the method registry (facts), provenance, the task runner
+    ("world", ("hnsdt.envs", "hnsdt.symbolic")),  # the grid worlds and the symbolic planner over them
+    ("networks", ("hnsdt.models",)),  # the trained networks and how they are fitted
+    ("policies", ("hnsdt.agents", "hnsdt.baselines", "hnsdt.implementations")),  # agents, and what implements a method
+    ("data", ("hnsdt.data", "hnsdt.logs")),  # LeRobot datasets and episode recordings
+    ("evaluation", ("hnsdt.evaluation",)),  # evaluations, their tables, the theorem checks
+    ("composition", ("hnsdt.compose",)),  # params, settings, the experiments' splits, training plans
+    ("report", ("hnsdt.report",)),  # report.md and its figures
+    ("stages", ("hnsdt.stages",)),  # one module per DVC stage
+    ("command line", ("hnsdt.cli",)),
+)
+REFERENCE = re.compile(r"^(hnsdt(?:\.\w+)+):\w+$")  # "module:attribute", resolved on use
 
 
 def module_name(path: Path) -> str:
@@ -19,8 +34,9 @@ def module_name(path: Path) -> str:
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
-def imports(path: Path, top_level_only: bool = False) -> set[str]:
-    """The hnsdt modules a file imports (anywhere in it, or only at module level)."""
+def imports(path: Path, top_level_only: bool = False, strings: bool = False) -> set[str]:
+    """The hnsdt modules a file imports (anywhere in it, or only at module level; with ``strings``, also the
+    modules its ``"module:attribute"`` strings name)."""
     tree = ast.parse(path.read_text())
     nodes = tree.body if top_level_only else ast.walk(tree)
     out = set()
@@ -29,6 +45,9 @@ def imports(path: Path, top_level_only: bool = False) -> set[str]:
             out.add(node.module)
         elif isinstance(node, ast.Import):
             out |= {a.name for a in node.names if a.name.startswith("hnsdt")}
+        elif strings and isinstance(node, ast.Constant) and isinstance(node.value, str):
+            if m := REFERENCE.match(node.value):
+                out.add(m.group(1))
     return out
 
 
@@ -36,15 +55,32 @@ def under(module: str, prefixes) -> bool:
     return any(module == p or module.startswith(p + ".") for p in prefixes)
 
 
-def test_the_lower_layers_never_import_the_upper_ones():
+def layer_of(module: str) -> int | None:
+    """The index of ``module``'s layer in LAYERS (None for the package root)."""
+    found = [i for i, (_, prefixes) in enumerate(LAYERS) if under(module, prefixes)]
+    return found[0] if found else None
+
+
+def upward_imports(files: dict[str, Path]) -> dict[str, list[str]]:
+    """``module -> the modules of higher layers it imports``, over ``files`` (module name -> path)."""
     offenders = {}
-    for path in PACKAGE.rglob("*.py"):
-        name = module_name(path)
-        if under(name, LOWER):
-            bad = {m for m in imports(path) if under(m, UPPER)}
-            if bad:
-                offenders[name] = sorted(bad)
-    assert not offenders, offenders
+    for name, path in files.items():
+        here = layer_of(name)
+        if here is None:
+            continue
+        bad = sorted(m for m in imports(path, strings=True) if (there := layer_of(m)) is not None and there > here)
+        if bad:
+            offenders[name] = [f"{m} ({LAYERS[layer_of(m)][0]} above {LAYERS[here][0]})" for m in bad]
+    return offenders
+
+
+def test_every_module_has_a_layer():
+    modules = {module_name(p) for p in PACKAGE.rglob("*.py")} - {"hnsdt"}
+    assert not sorted(m for m in modules if layer_of(m) is None)
+
+
+def test_no_module_imports_a_layer_above_it_not_even_by_a_string():
+    assert not upward_imports({module_name(p): p for p in PACKAGE.rglob("*.py")})
 
 
 def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
@@ -74,7 +110,14 @@ def test_no_import_cycle_not_even_through_imports_inside_functions():
     assert _cycle(graph) is None, _cycle(graph)
 
 
-def test_the_checks_can_fail():
+def test_the_checks_can_fail(tmp_path):
     assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert _cycle({"a": {"b"}, "b": set()}) is None
-    assert under("hnsdt.data.windows", UPPER) and not under("hnsdt.database", UPPER)
+    assert under("hnsdt.data.windows", ("hnsdt.data",)) and not under("hnsdt.database", ("hnsdt.data",))
+    ground = tmp_path / "ground.py"
+    ground.write_text('def f():\n    from hnsdt.stages.common import run\n')
+    named = tmp_path / "named.py"
+    named.write_text('AGENT = "hnsdt.agents.symbolic:make_agent"\n')
+    found = upward_imports({"hnsdt.core.ground": ground, "hnsdt.core.named": named, "hnsdt.stages.fine": ground})
+    assert found == {"hnsdt.core.ground": ["hnsdt.stages.common (stages above ground)"],
+                     "hnsdt.core.named": ["hnsdt.agents.symbolic (policies above ground)"]}

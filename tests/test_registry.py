@@ -9,7 +9,9 @@ from pathlib import Path
 import pytest
 
 from hnsdt.agents.rollout import Agent
-from hnsdt.core.methods import METHODS, STAGES, architectures, resolve
+from hnsdt.core.methods import METHODS, STAGES
+from hnsdt.implementations import CODE, code_of, resolve
+from hnsdt.models.checkpoint import architectures
 
 PACKAGE = Path(__file__).resolve().parent.parent / "hnsdt"
 
@@ -41,14 +43,15 @@ def test_no_module_but_the_registry_spells_a_method_name():
 def test_every_entry_resolves_to_its_code(name):
     import dataclasses
 
-    m = METHODS[name]
-    assert callable(resolve(m.agent))
+    m, code = METHODS[name], code_of(name)
+    assert m.code in CODE and callable(resolve(code.agent))
     if m.training == "none":
-        assert not (m.network or m.trainer or m.config or m.stage)
+        assert not (code.network or code.trainer or code.config or m.stage)
         return
-    network, config = resolve(m.network), resolve(m.config)
-    assert callable(resolve(m.trainer)) and dataclasses.is_dataclass(config)
-    assert dataclasses.is_dataclass(network.config_class) and architectures()[network.arch] == m.network
+    network, config = resolve(code.network), resolve(code.config)
+    assert callable(resolve(code.trainer)) and dataclasses.is_dataclass(config)
+    assert dataclasses.is_dataclass(network.config_class) and architectures()[network.arch] is network
+    assert architectures()[resolve(code.view_network).arch] is resolve(code.view_network)
     assert set(m.fixed) <= {f.name for f in dataclasses.fields(network.config_class)}
     assert name in STAGES[m.stage]
 
@@ -96,7 +99,7 @@ def test_every_method_trains_and_acts_through_its_registry_entry(tiny, name):
         assert curve and facts["usage"]
         path = save_checkpoint(model, dataset.parent / "models" / name, {"method": name, **facts})
         model, meta = load_checkpoint(path)
-        assert json.loads((path / "config.json").read_text())["arch"] == resolve(METHODS[name].network).arch
+        assert json.loads((path / "config.json").read_text())["arch"] == resolve(code_of(name).network).arch
     agent = build_agent(name, env.layout, method_executor(params, name), model, meta)
     assert isinstance(agent, Agent)  # the protocol every evaluated policy follows
     episodes = run_cell(Cell(name, "keydoor", 0.1, 0), 0, env.layout, 20, 3, agent)

@@ -18,7 +18,8 @@ from typing import Any
 import yaml
 
 from hnsdt.agents.executor import ExecutorConfig
-from hnsdt.core.methods import BASELINES, DT_METHODS, METHODS, PROPOSED, resolve
+from hnsdt.core.methods import BASELINES, DT_METHODS, METHODS, PROPOSED
+from hnsdt.implementations import code_of, resolve
 from hnsdt.compose.params import SECTIONS, Params, ParamsError, validate
 from hnsdt.data.collect import POLICIES, Behaviour, CollectConfig
 from hnsdt.envs import ENV_IDS, LayoutError, load_layout
@@ -268,7 +269,7 @@ def baseline_settings(params: Params, method: str, env: str | EnvSpec, seed: int
     device = str(pick_device(params.need("train").device))
     grid = {"n_flags": lay.n_flags, "grid_h": lay.shape[0], "grid_w": lay.shape[1]}
     entry = METHODS[method]
-    net_cls, train_cls = resolve(entry.network).config_class, resolve(entry.config)
+    net_cls, train_cls = resolve(code_of(entry.name).network).config_class, resolve(code_of(entry.name).config)
     net_fixed = {**entry.fixed, **grid}
     train_fixed = {"seed": seed, "device": device}
     train_fields = {f.name for f in dataclasses.fields(train_cls)}

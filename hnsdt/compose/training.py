@@ -19,7 +19,8 @@ import numpy as np
 from hnsdt.compose.config import (EnvSpec, Params, baseline_settings, env_spec, fill, layout_executor, method_executor,
                                model_config, train_settings)
 from hnsdt.envs.layout import Layout
-from hnsdt.core.methods import METHODS, network_for, resolve
+from hnsdt.core.methods import METHODS
+from hnsdt.implementations import code_of, network_for, resolve
 from hnsdt.core.methods import method as lookup_method
 
 
@@ -109,7 +110,7 @@ class StepsToExit:
             run = list(run)
             layout = run[0].layout if len(run) == 1 else tuple(c.layout for c in run)
             starts = np.concatenate([c.starts for c in run])
-            agent = resolve(METHODS[self.method].agent)(model, self.facts, layout, self.executor)
+            agent = resolve(code_of(self.method).agent)(model, self.facts, layout, self.executor)
             env = KeyDoorVectorEnv(len(starts), layout, 0.0, max_steps)
             lengths += [e.length if e.success else max_steps for e in rollout(env, agent, 0, starts)]
         return float(np.mean(lengths))
@@ -245,7 +246,7 @@ def train_run(task: TrainTask | SeedStack):
 
     runs = task.runs if isinstance(task, SeedStack) else (task,)
     first = runs[0]
-    trainer, network = resolve(METHODS[first.method].trainer), network_for(first.method, first.model_cfg)
+    trainer, network = resolve(code_of(first.method).trainer), network_for(first.method, first.model_cfg)
     if METHODS[first.method].training == "online":  # on (layout(s), max_steps), every seed of the stack at once
         out = trainer(*first.data, first.model_cfg, [r.train_cfg for r in runs], progress=first.progress,
                       desc=f"{first.method} seed {', '.join(str(r.seed) for r in runs)}", network=network)
@@ -316,10 +317,10 @@ def layout_network_configs(params: Params, method: str, seed: int, layout: Layou
 
     g = params.need("generalisation")
     entry = lookup_method(method)
-    if not entry.view_network:
+    if not code_of(method).view_network:
         raise ValueError(f"generalisation: {method} has no network that reads views")
     env = EnvSpec(g.family, f"hnsdt/generated-{g.family}", layout, g.max_steps)
-    view_cls = resolve(entry.view_network).config_class
+    view_cls = resolve(code_of(method).view_network).config_class
     if entry.stage == "train":  # a decision transformer: `train` and `models.<family>`
         ts, models = train_settings(params), params.models
         if g.family not in models:

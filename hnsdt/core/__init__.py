@@ -1,4 +1,3 @@
-"""What every stage runs on: the params schema (:mod:`~hnsdt.compose.params`) and the settings made from it
-(:mod:`~hnsdt.compose.config`), the method registry (:mod:`~hnsdt.core.methods`), the stage functions the DVC
-scripts call (:mod:`~hnsdt.core.stages`), the task runner (:mod:`~hnsdt.core.compute`), and the file, provenance
-and reproducibility helpers. Every DVC stage depends on this folder as a whole."""
+"""The ground floor: what every layer above may use and nothing here imports from them — atomic file writes
+(:mod:`.fileio`), same-seed-same-bytes settings (:mod:`.reproducible`), the method registry's facts
+(:mod:`.methods`), provenance (:mod:`.provenance`) and the task runner (:mod:`.compute`)."""

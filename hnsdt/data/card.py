@@ -3,8 +3,9 @@
 The card is LeRobot's own (``create_lerobot_dataset_card``: YAML front matter with the licence, the
 ``robotics`` task category, the ``LeRobot`` tag and the parquet ``configs``; the ``meta/info.json`` structure)
 filled with what a user of these data needs: features and their meaning, the behaviours and how often they
-succeed, sub-goal coverage under both labellings, the layout, the paper's BibTeX and the provenance (git
-revision, params digest, md5 of the data files). The arguments are kept in ``meta/hnsdt.json``, so
+succeed, sub-goal coverage under both labellings, the layout, the paper's BibTeX and the provenance (md5
+of the data files, and where to find the revision that made them: no file names it, so the same collection gives
+the same bytes). The arguments are kept in ``meta/hnsdt.json``, so
 ``hnsdt dataset push`` gives the Hub the same card LeRobot's ``push_to_hub`` would write from them.
 """
 
@@ -27,7 +28,7 @@ BIBTEX = """@inproceedings{baheri2025hnsdt,
 }"""
 
 
-def description(cfg, episodes: list[dict], provenance: dict, layouts=None) -> str:
+def description(cfg, episodes: list[dict], layouts=None) -> str:
     """The card's body: what the data are, how they were made, what they cover. ``layouts``: a dataset over
     many layouts (``cfg.layout`` is then the first), which stores views."""
     total = sum(len(ep["actions"]) for ep in episodes)
@@ -67,17 +68,18 @@ def description(cfg, episodes: list[dict], provenance: dict, layouts=None) -> st
     lines += ["", "The sub-goal vocabulary (ids → names) is `subgoal_vocabulary` in `meta/hnsdt.json`; per-episode "
               "metadata (behaviour, fail_prob, seed, outcome) is `meta/hnsdt_episodes.parquet`.", "",
               "### Provenance", "",
-              f"- git revision of hnsdt: `{provenance.get('git_revision', 'unknown')}`",
-              f"- params digest (sha256 of params.yaml, 16 hex): `{provenance.get('params_digest', 'unknown')}`",
-              "- md5 of the data files (`data/**/*.parquet`, in path order): `{data_md5}`"]
+              "- md5 of the data files (`data/**/*.parquet`, in path order): `{data_md5}`",
+              "- made by the collection settings in `meta/hnsdt.json`; the files name no code revision or run, so "
+              "the same collection gives the same bytes. The git revision that made them is the commit whose "
+              "`dvc.lock` lists this folder's md5 (the pipeline's report cites both){pushed_from}"]
     return "\n".join(lines) + "\n"
 
 
-def card_arguments(cfg, episodes: list[dict], provenance: dict, layouts=None) -> dict:
+def card_arguments(cfg, episodes: list[dict], layouts=None) -> dict:
     """``create_lerobot_dataset_card`` / ``push_to_hub`` arguments (kept in meta/hnsdt.json)."""
     env = cfg.env_id.split("/")[-1]
     return {"tags": ["hnsdt", "gridworld", "key-door", "neuro-symbolic", "decision-transformer", env],
-            "license": cfg.license, "dataset_description": description(cfg, episodes, provenance, layouts),
+            "license": cfg.license, "dataset_description": description(cfg, episodes, layouts),
             "paper": "Baheri and Alm, *Hierarchical Neuro-Symbolic Decision Transformer*, NeSy 2025",
             "citation_bibtex": BIBTEX}
 
@@ -90,17 +92,20 @@ def data_md5(root: str | Path) -> str:
     return h.hexdigest()
 
 
-def template_values(arguments: dict, md5: str) -> dict:
-    """The card template's values beside ``tags`` and ``license``, the data md5 filled in."""
+def template_values(arguments: dict, md5: str, pushed_from: str | None = None) -> dict:
+    """The card template's values beside ``tags`` and ``license``, the data md5 filled in, and (a card that goes
+    to the Hub) the git revision it was pushed from."""
     values = {k: v for k, v in arguments.items() if k not in ("tags", "license")}
-    values["dataset_description"] = values["dataset_description"].replace("{data_md5}", md5)
+    pushed = f"; pushed from hnsdt revision `{pushed_from}`" if pushed_from else ""
+    values["dataset_description"] = (values["dataset_description"].replace("{data_md5}", md5)
+                                     .replace("{pushed_from}", pushed))
     return values
 
 
-def render_card(arguments: dict, info, repo_id: str, md5: str) -> str:
+def render_card(arguments: dict, info, repo_id: str, md5: str, pushed_from: str | None = None) -> str:
     """The card text: LeRobot's template filled with ``arguments`` (``info`` = the dataset's meta.info)."""
     from lerobot.datasets.utils import create_lerobot_dataset_card
 
     card = create_lerobot_dataset_card(tags=arguments["tags"], dataset_info=info, license=arguments["license"],
-                                       repo_id=repo_id, **template_values(arguments, md5))
+                                       repo_id=repo_id, **template_values(arguments, md5, pushed_from))
     return str(card).rstrip() + "\n"

@@ -135,9 +135,9 @@ def _episode_record(cfg: CollectConfig, b: Behaviour, fail_prob: float, seed: in
 MIN_VIDEO_WIDTH = 25  # pixels: SVT-AV1, LeRobot's video encoder, dies (SIGFPE) on narrower frames (measured)
 
 
-def collect_dataset(cfg: CollectConfig, root: str | Path, repo_id: str, progress: bool = True,
-                    provenance: dict | None = None) -> Path:
-    """Collect and write the dataset, its card citing ``provenance`` (git revision, params digest)."""
+def collect_dataset(cfg: CollectConfig, root: str | Path, repo_id: str, progress: bool = True) -> Path:
+    """Collect and write the dataset with its card; nothing in it names the code revision or the run, so the same
+    collection gives the same bytes."""
     width = cfg.layout.shape[1] * cfg.render
     if cfg.render and width < MIN_VIDEO_WIDTH:
         raise ValueError(f"collect.render: {cfg.render} pixels per cell draw layout {cfg.layout.name}'s "
@@ -155,16 +155,15 @@ def collect_dataset(cfg: CollectConfig, root: str | Path, repo_id: str, progress
     from hnsdt.data.card import card_arguments
     from hnsdt.data.lerobot_io import write_dataset  # lerobot takes seconds to import: only when writing
 
-    card = card_arguments(cfg, episodes, provenance or {})
+    card = card_arguments(cfg, episodes)
     return write_dataset(root, repo_id, cfg.layout, episodes, cfg.fps, meta, card, progress=progress,
                          render_px=cfg.render)
 
 
 def collect_on_layouts(cfg: CollectConfig, layouts: list[Layout], root: str | Path, repo_id: str, view_radius: int,
-                       family: str, progress: bool = True, provenance: dict | None = None) -> Path:
+                       family: str, progress: bool = True) -> Path:
     """Collect ``cfg``'s behaviours on every layout of ``layouts`` (each its own batch seeds) and write one
-    dataset whose frames also store the local view of ``view_radius`` and their layout's index; its card cites
-    ``provenance``. ``cfg.layout`` is ignored: the layouts' list takes its place."""
+    dataset whose frames also store the local view of ``view_radius`` and their layout's index. ``cfg.layout`` is ignored: the layouts' list takes its place."""
     from hnsdt.data.card import card_arguments
     from hnsdt.data.lerobot_io import write_dataset
 
@@ -178,6 +177,6 @@ def collect_on_layouts(cfg: CollectConfig, layouts: list[Layout], root: str | Pa
             "layouts": [lay.name for lay in layouts], "max_steps": cfg.max_steps, "fps": cfg.fps, "seed": cfg.seed,
             "fail_probs": list(cfg.fail_probs), "behaviours": [vars(b) for b in cfg.behaviours],
             "executor": vars(cfg.executor)}
-    card = card_arguments(replace(cfg, layout=layouts[0]), episodes, provenance or {}, layouts)
+    card = card_arguments(replace(cfg, layout=layouts[0]), episodes, layouts)
     return write_dataset(root, repo_id, layouts, episodes, cfg.fps, meta, card, progress=progress,
                          view_radius=view_radius)

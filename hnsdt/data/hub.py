@@ -6,7 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from hnsdt.data.card import template_values, render_card
+from hnsdt.core.provenance import git_revision
+from hnsdt.data.card import render_card, template_values
 
 # (hnsdt.data.lerobot_io, which imports lerobot and torch — seconds —, is imported where a dataset is read: a push
 # that cannot reach the Hub fails at once)
@@ -21,7 +22,7 @@ def push_plan(root: str | Path, repo_id: str) -> tuple[list[str], str]:
     files = sorted(p.relative_to(root).as_posix() for p in root.rglob("*")
                    if p.is_file() and not p.relative_to(root).as_posix().startswith("images/"))
     info = open_dataset(root, repo_id=repo_id).meta.info
-    return files, render_card(meta["card"], info, repo_id, meta["data_md5"])
+    return files, render_card(meta["card"], info, repo_id, meta["data_md5"], git_revision())
 
 
 def _card_meta(root: Path) -> dict:
@@ -49,7 +50,7 @@ def push_dataset(root: str | Path, repo_id: str, private: bool = False) -> None:
     ds = open_dataset(root, repo_id=repo_id)
     try:
         ds.push_to_hub(tags=card["tags"], license=card["license"], private=private, tag_version=True,
-                       **template_values(card, meta["data_md5"]))
+                       **template_values(card, meta["data_md5"], git_revision()))
     except Exception as e:  # noqa: BLE001  (requests, huggingface_hub and lerobot raise many kinds)
         raise RuntimeError(f"cannot push {root} to the Hugging Face Hub as {repo_id}: {type(e).__name__}: {e} "
                            "(network? `huggingface-cli login`?)") from None

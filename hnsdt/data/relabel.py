@@ -20,7 +20,7 @@ from hnsdt.data.collect import random_start_states
 from hnsdt.envs.dynamics import Rules
 from hnsdt.envs.observation import view_states
 from hnsdt.envs.vector import KeyDoorVectorEnv
-from hnsdt.core.methods import METHODS, resolve
+from hnsdt.implementations import code_of, resolve
 from hnsdt.models.windows import Frames, frames_from_arrays
 
 RELABELLED = "relabelled"  # the behaviour name of the learner's relabelled episodes (``Frames.policy``)
@@ -33,7 +33,7 @@ def learner_frames(model, method: str, facts: dict, layouts: list, executor: Exe
     step's sub-goal (the planner's operator the learner was executing; for a learner without a planner, the
     planner's first operator from that step's state). Seeded by ``seed``."""
     arrays: dict[str, list] = {k: [] for k in ("states", "actions", "rewards", "ids", "targets", "episode", "t")}
-    make_agent = resolve(METHODS[method].agent)
+    make_agent = resolve(code_of(method).agent)
     n_episodes = 0
     for li, layout in enumerate(layouts):
         expert = SymbolicAgent(layout, executor)

@@ -16,7 +16,8 @@ import numpy as np
 
 from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.agents.rollout import Agent, Episode, rollout
-from hnsdt.core.methods import method as lookup_method, resolve
+from hnsdt.core.methods import method as lookup_method
+from hnsdt.implementations import code_of, resolve
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv, Streams
 
@@ -36,7 +37,7 @@ def load_model(path: str | Path, method: str, device: str = "cpu", view: bool = 
     model, meta = load_checkpoint(path, device)
     if meta.get("method", method) != method:
         raise ValueError(f"{path} holds a {meta['method']} model")
-    if view and meta.get("arch") != resolve(entry.view_network).arch:
+    if view and meta.get("arch") != resolve(code_of(method).view_network).arch:
         raise ValueError(f"{path} is not a view model (train it with `python pipeline/generalisation.py train "
                          f"--method {method}`)")
     return model, meta
@@ -46,8 +47,7 @@ def build_agent(method: str, layout: Layout, executor: ExecutorConfig, model=Non
                 epsilon: float = 0.0, agent_seed: int = 0) -> Agent:
     """The batched agent of ``method`` around its trained ``model``. ``epsilon`` and ``agent_seed`` only
     matter to the online baselines (ε-greedy noise, sampled options)."""
-    entry = lookup_method(method)
-    return resolve(entry.agent)(model, meta or {}, layout, executor, epsilon, agent_seed)
+    return resolve(code_of(method).agent)(model, meta or {}, layout, executor, epsilon, agent_seed)
 
 
 def training_usage(models_root: str | Path, env: str, method: str, seed: int) -> dict:

@@ -1,10 +1,11 @@
 """Checkpoints of every learned model: a folder with ``model.safetensors`` (weights) and ``config.json``
 (``arch``, the model's config dataclass under ``model``, and training facts). The architectures are the
-networks of the method registry (:mod:`hnsdt.core.methods`): each model class names its ``arch`` and
+subclasses of :class:`hnsdt.models.network.Network` in this package: each names its ``arch`` and
 ``config_class``."""
 
 from __future__ import annotations
 
+import importlib
 import json
 from dataclasses import asdict
 from pathlib import Path
@@ -13,8 +14,23 @@ import torch
 from safetensors.torch import load_file, save_file
 
 from hnsdt.core.fileio import atomic_dir
-from hnsdt.core.methods import architectures, resolve
+from hnsdt.models.network import Network
 
+NETWORK_MODULES = ("dt", "qnetwork", "recurrent", "view")  # the modules of this package that define networks
+
+
+
+def architectures() -> dict[str, type]:
+    """Checkpoint architecture name -> model class, over every network of this package."""
+    for module in NETWORK_MODULES:  # (a network class names its arch when it is defined)
+        importlib.import_module(f"hnsdt.models.{module}")
+    found, todo = {}, [Network]
+    while todo:
+        cls = todo.pop()
+        todo += cls.__subclasses__()
+        if cls is not Network:
+            found[cls.arch] = cls
+    return found
 
 
 def save_checkpoint(model: torch.nn.Module, out_dir: str | Path, extra: dict | None = None) -> Path:
@@ -39,10 +55,10 @@ def load_checkpoint(path: str | Path, device: str = "cpu") -> tuple[torch.nn.Mod
     except json.JSONDecodeError as e:
         raise ValueError(f"checkpoint {path}: config.json is not valid JSON ({e})") from None
     arch = meta.get("arch", "decision_transformer")
-    known = architectures()  # the networks of the method registry
+    known = architectures()
     if arch not in known:
         raise ValueError(f"checkpoint {path}: unknown arch {arch!r}; known: {', '.join(sorted(known))}")
-    network = resolve(known[arch])
+    network = known[arch]
     try:
         model = network(network.config_class(**meta["model"]))
     except (KeyError, TypeError, ValueError) as e:

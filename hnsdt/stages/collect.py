@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 
 from hnsdt.compose.config import Params
-from hnsdt.stages.common import provenance
 
 
 def collect(params: Params, env: str, out: Path, repo_id: str | None = None, progress: bool = True) -> Path:
@@ -13,7 +12,6 @@ def collect(params: Params, env: str, out: Path, repo_id: str | None = None, pro
     from hnsdt.compose.config import collect_config
     from hnsdt.data.collect import collect_dataset
 
-    root = collect_dataset(collect_config(params, env), out, repo_id or f"local/{env}", progress=progress,
-                           provenance=provenance(params))
+    root = collect_dataset(collect_config(params, env), out, repo_id or f"local/{env}", progress=progress)
     print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
     return root

@@ -5,10 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from hnsdt.compose.config import Params
-from hnsdt.stages import common
 
 
-def collect_unseen(params: Params, out: Path, progress: bool = True, provenance: dict | None = None) -> Path:
+def collect_unseen(params: Params, out: Path, progress: bool = True) -> Path:
     """Stage `collect_generalisation`: noisy-planner episodes on every training layout of the unseen-layout
     experiment, one LeRobot dataset with local views at ``out``."""
     from hnsdt.compose import generalisation as gen
@@ -19,6 +18,6 @@ def collect_unseen(params: Params, out: Path, progress: bool = True, provenance:
     train = gen.training_layouts(params)
     gen.check_sources(train, max(cfg.fail_probs))
     root = collect_on_layouts(cfg, [s.layout for s in train], out, f"local/generated-{g.family}", g.view_radius,
-                              g.family, progress, common.provenance(params) if provenance is None else provenance)
+                              g.family, progress)
     print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
     return root
