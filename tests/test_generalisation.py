@@ -13,7 +13,7 @@ from hnsdt.envs.generate import FAMILIES, FamilySizes, check_usable, generate, w
 from hnsdt.stages.collect_unseen import collect_unseen
 from hnsdt.stages.evaluate_unseen import evaluate_unseen
 from hnsdt.stages.train_unseen import plan_unseen
-from hnsdt.stages.replay import replay_unseen
+from hnsdt.stages.replay import find_episodes, record_again
 from hnsdt.compose.params import validate
 from conftest import hnsdt_cli
 from hnsdt.envs.observation import (DOOR_CLOSED, DOOR_OPEN, EXIT, FLOOR, ITEM, KEY, OUTSIDE, WALL, full_view,
@@ -596,26 +596,28 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     assert out.returncode == 2 and out.stderr.strip() == (
         "hnsdt: error: --splits: no split nope here (the experiment's: train, heldout, minigrid, drawn)")
     assert not (tmp_path / "res").exists()
-    # any evaluated episode is made again from its checkpoint and seeds and recorded (`generalisation replay`),
-    # checked against its row: the reference's every episode (their steps differ at fail_prob 0.2), one each else
-    from hnsdt.evaluation.layouts import layout_episode_id
-
-    ids = [layout_episode_id(*key) for key in zip(table.method, table.seed, table.layout, table.fail_prob,
-                                                  table.episode)]
-    chosen = [i for i, m in zip(ids, table.method) if m == "symbolic"] + [
-        "hnsdt/seed0/" + table.layout.iloc[-1] + "/fp0.2/ep1", "gru/seed2/keydoor_maze-0/fp0/ep0",
-        "dqn/seed0/" + table.layout.iloc[-1] + "/fp0.2/ep0"]
+    # any evaluated episode is made again from its checkpoint and seeds and recorded (`hnsdt replay ID`, the
+    # paper protocol's command), checked against its row: the reference's every episode (their steps differ at
+    # fail_prob 0.2), one each else; an episode is METHOD/LAYOUT/fpP/seedK/epI, a drawn map by its file's name
+    assert list(table.episode_id[:1]) == ["hnsdt/keydoor_maze-0/fp0/seed0/ep0"]
+    assert set(table[table.split == "drawn"].layout) == {"corridor"}
+    chosen = list(table[table.method == "symbolic"].episode_id) + [
+        "hnsdt/" + table.layout.iloc[-1] + "/fp0.2/seed0/ep1", "gru/keydoor_maze-0/fp0/seed2/ep0",
+        "dqn/" + table.layout.iloc[-1] + "/fp0.2/seed0/ep0"]
     assert len(set(table[table.method == "symbolic"].steps)) > 1
     for episode_id in chosen:
-        row, files = replay_unseen(validate(params), tmp_path / "models", tmp_path / "results", episode_id)
+        (found,) = find_episodes(validate(params), episode_id, results=tmp_path / "results",
+                                 models=tmp_path / "models")
+        assert found.experiment == "unseen" and found.recorded is None
+        files = record_again(validate(params), found)
         assert files[".mcap"].startswith(b"\x89MCAP") and files[".rrd"], episode_id
-    out = hnsdt_cli("generalisation", "replay", "--episode", chosen[-1], "--models", tmp_path / "models",
-                    "--results", tmp_path / "results", "--out", tmp_path / "ep.rrd", cwd=tmp_path)
+    out = hnsdt_cli("replay", chosen[-1], "--models", tmp_path / "models", "--results", tmp_path / "results",
+                    "--out", tmp_path / "ep.rrd", cwd=tmp_path)
     assert out.returncode == 0 and "the same steps as evaluated" in out.stdout, out.stderr
     assert (tmp_path / "ep.rrd").stat().st_size and (tmp_path / "ep.mcap").stat().st_size
-    out = hnsdt_cli("generalisation", "replay", "--episode", "hnsdt/seed0/nowhere/fp0/ep0", "--models",
-                    tmp_path / "models", "--results", tmp_path / "results", cwd=tmp_path)
-    assert out.returncode == 2 and out.stderr.startswith("hnsdt: error: no episode 'hnsdt/seed0/nowhere/fp0/ep0'")
+    out = hnsdt_cli("replay", "hnsdt/nowhere/fp0/seed0/ep0", "--models", tmp_path / "models", "--results",
+                    tmp_path / "results", cwd=tmp_path)
+    assert out.returncode == 2 and out.stderr.startswith("hnsdt: error: no episode 'hnsdt/nowhere/fp0/seed0/ep0'")
     with pytest.raises(ValueError, match="not in generalisation.methods"):
         plan_unseen(validate(params), "options", dataset)
 
@@ -906,9 +908,19 @@ def test_a_folder_of_drawn_maps_is_checked_with_one_line_naming_the_problem(tmp_
     (tmp_path / "two").mkdir()
     (tmp_path / "two/two_keys.txt").write_text("@.a.b\n##A##\n..B.G\n")
     params["generalisation"]["drawn"]["folder"] = str(tmp_path / "two")
-    with pytest.raises(ValueError, match=r"layout .*two_keys.txt \(drawn\) has 4 keys, doors and items, the "
+    with pytest.raises(ValueError, match=r"layout two_keys \(drawn\) has 4 keys, doors and items, the "
                                          r"train layouts 2"):
         gen.check_sources(gen.layout_splits(validate(params), evaluated_only=True), 0.1)
+    (tmp_path / "bad").mkdir()  # every bad map of a folder is named at once, each by its file name
+    (tmp_path / "bad/fine.txt").write_text("@.a\n##A\n..G\n")
+    (tmp_path / "bad/nostart.txt").write_text("..a\n##A\n..G\n")
+    (tmp_path / "bad/walled.txt").write_text("@.a\n###\n..G\n")
+    with pytest.raises(LayoutError) as refused:
+        gen.drawn_layouts(tmp_path / "bad", 100)
+    message = str(refused.value)
+    assert "2 of 3 maps cannot be used" in message and "nostart" in message and "walled" in message
+    assert "fine" not in message.replace(str(tmp_path), "") and "\n" not in message
+    assert [s.name for s in gen.drawn_layouts(REPO / "layouts/drawn", 100)][:2] == ["comb_12x15", "corridor_5x13"]
     path = tmp_path / "params.yaml"
     path.write_text(yaml.safe_dump(params))
     code = main(["--params", str(path), "generalisation", "evaluate", "--out", str(tmp_path / "r"),

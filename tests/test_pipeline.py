@@ -164,6 +164,13 @@ def test_replay_points_to_an_evaluated_episode(repo_copy, tmp_path):
     opened = cell.stdout.splitlines()[-1]
     assert opened.startswith("open with: rerun ") and opened.count(".rrd") == len(METHODS)
     assert "foxglove_layout.json" in opened
+    # the unseen-layout experiment's episodes through the same command, by the same kind of id
+    unseen = pd.read_csv(repo_copy / "generalisation/results/episodes.csv")
+    episode = unseen[(unseen.split == "drawn") & (unseen.method == "hnsdt")].episode_id.iloc[0]
+    assert episode.startswith("hnsdt/") and "/" not in unseen[unseen.split == "drawn"].layout.iloc[0]
+    drawn = hnsdt_cli("replay", episode, "--experiment", "unseen", "--out", tmp_path / "drawn.rrd", cwd=repo_copy)
+    assert drawn.returncode == 0 and "(the same steps as evaluated)" in drawn.stdout, drawn.stderr
+    assert f"{episode} (unseen, drawn)" in drawn.stdout and (tmp_path / "drawn.mcap").stat().st_size
 
 
 def test_an_episode_made_again_is_the_evaluated_one_to_the_bit(repo_copy):

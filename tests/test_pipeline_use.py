@@ -48,7 +48,7 @@ def test_a_changed_knob_reruns_only_the_stages_that_read_it(repo_copy, first_run
 
 def test_the_trained_models_run_on_a_folder_of_a_users_maps(tmp_path, repo_copy, first_run):
     """`hnsdt generalisation evaluate --drawn FOLDER --splits drawn`: the pipeline's trained models on maps a user
-    drew, as the split `drawn` alone; then one of those episodes made again and recorded (`generalisation replay`);
+    drew, as the split `drawn` alone; then one of those episodes made again and recorded (`hnsdt replay`);
     the pipeline's outputs untouched."""
     (tmp_path / "mine").mkdir()
     corridor = tmp_path / "mine/long_corridor.txt"
@@ -58,10 +58,10 @@ def test_the_trained_models_run_on_a_folder_of_a_users_maps(tmp_path, repo_copy,
                     tmp_path / "results", "--quiet", cwd=repo_copy)
     assert out.returncode == 0, out.stderr
     drawn = pd.read_csv(tmp_path / "results/episodes.csv")
-    assert set(drawn.split) == {"drawn"} and set(drawn.layout) == {str(corridor)}
+    assert set(drawn.split) == {"drawn"} and set(drawn.layout) == {"long_corridor"}
     assert set(drawn.method) == set(UNSEEN) | {"symbolic"} and drawn[drawn.method == "symbolic"].success.all()
-    again = hnsdt_cli("generalisation", "replay", "--episode", f"hnsdt/seed0/{corridor}/fp0.2/ep1", "--drawn",
-                      tmp_path / "mine", "--results", tmp_path / "results", "--out", tmp_path / "ep.rrd", cwd=repo_copy)
+    again = hnsdt_cli("replay", "hnsdt/long_corridor/fp0.2/seed0/ep1", "--drawn", tmp_path / "mine", "--results",
+                      tmp_path / "results", "--out", tmp_path / "ep.rrd", cwd=repo_copy)
     assert again.returncode == 0 and "the same steps as evaluated" in again.stdout, again.stderr
     assert (tmp_path / "ep.mcap").stat().st_size
     assert (repo_copy / "generalisation/results/summary.csv").read_bytes() == before

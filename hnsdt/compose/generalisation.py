@@ -3,8 +3,9 @@ methods transfer to maps they were not trained on? What is its own are the layou
 ``train`` = the family's generated layouts of seeds ``0..N-1``, ``heldout`` = seeds from :data:`HELDOUT_SEED` on,
 ``minigrid`` = the ``minigrid`` package's own DoorKey grids converted to our layouts (our dynamics), ``drawn`` =
 the layout files of a folder (maps of any shape); ``validation`` (seeds from :data:`VALIDATION_SEED` on) chooses
-training budgets and is never evaluated. No two splits share a grid. Its stages (:mod:`hnsdt.core.stages`,
-``*_unseen``) run the paper protocol's collection, training and evaluation code on these splits.
+training budgets and is never evaluated. No two splits share a grid. Its stages (:mod:`hnsdt.stages`,
+``*_unseen``) run the paper protocol's collection, training and evaluation code on these splits. A layout is
+named by its generator and seed, its MiniGrid id and seed, or (drawn) its file's name without the folder.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 
 from hnsdt.compose.config import Params
 from hnsdt.envs.generate import check_usable, generate
-from hnsdt.envs.layout import Layout, load_layout
+from hnsdt.envs.layout import Layout, LayoutError, parse_layout
 
 HELDOUT_SEED = 100_000  # held-out layouts are the family's seeds from here on
 VALIDATION_SEED = 200_000  # and validation layouts from here on
@@ -66,11 +67,20 @@ def validation_layouts(params: Params) -> list[Source]:
 
 
 def drawn_layouts(folder: str | Path, max_steps: int) -> list[Source]:
-    """Every layout file (``*.txt``) of ``folder``, by name, as the split ``drawn``."""
+    """Every layout file (``*.txt``) of ``folder``, named by its file name without ``.txt``, as the split
+    ``drawn``; a folder with bad maps is refused naming every one of them."""
     files = sorted(Path(folder).glob("*.txt"))
     if not files:
         raise ValueError(f"generalisation.drawn.folder {folder}: no layout files (*.txt) there")
-    return [Source("drawn", load_layout(f), max_steps) for f in files]
+    out, bad = [], []
+    for f in files:
+        try:
+            out.append(Source("drawn", parse_layout(f.read_text(), name=f.stem), max_steps))
+        except LayoutError as e:
+            bad.append(str(e))
+    if bad:
+        raise LayoutError(f"{folder}: {len(bad)} of {len(files)} maps cannot be used: " + "; ".join(bad))
+    return out
 
 
 def layout_splits(params: Params, evaluated_only: bool = False) -> list[Source]:
@@ -86,15 +96,28 @@ def layout_splits(params: Params, evaluated_only: bool = False) -> list[Source]:
 
 
 def _same_flags(sources: list[Source], error) -> None:
-    """One network reads every layout: all must have the first one's number of keys, doors and items."""
-    other = next((s for s in sources if s.layout.n_flags != sources[0].layout.n_flags), None)
-    if other is not None:
-        raise error(f"layout {other.name} ({other.split}) has {other.layout.n_flags} keys, doors and items, the "
-                    f"{sources[0].split} layouts {sources[0].layout.n_flags} (one network reads every split's flags)")
+    """One network reads every layout: all must have the first one's number of keys, doors and items (every
+    other layout is named)."""
+    others = [s for s in sources if s.layout.n_flags != sources[0].layout.n_flags]
+    if others:
+        named = ", ".join(f"{s.name} ({s.split}) has {s.layout.n_flags}" for s in others)
+        raise error(f"layout {named} keys, doors and items, the {sources[0].split} layouts "
+                    f"{sources[0].layout.n_flags} (one network reads every split's flags)")
 
 
 def check_sources(sources: list[Source], fail_prob: float) -> None:
-    """Every layout usable at the highest failure probability, and all with the same flags (one network)."""
+    """Every layout usable at the highest failure probability, all with the same flags (one network), no two
+    of a split with one name; the refusal names every layout at fault."""
     _same_flags(sources, lambda msg: ValueError(f"generalisation: {msg}"))
+    names = [(s.split, s.name) for s in sources]
+    twice = sorted({f"{name} ({split})" for split, name in names if names.count((split, name)) > 1})
+    if twice:
+        raise ValueError(f"generalisation: two layouts of a split share the name {', '.join(twice)}")
+    bad = []
     for src in sources:
-        check_usable(src.layout, src.max_steps, fail_prob)
+        try:
+            check_usable(src.layout, src.max_steps, fail_prob)
+        except LayoutError as e:
+            bad.append(f"{e} ({src.split})")
+    if bad:
+        raise LayoutError(f"{len(bad)} of {len(sources)} layouts cannot be used: " + "; ".join(bad))

@@ -4,7 +4,7 @@ its episodes made again."""
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import lru_cache, partial
 from pathlib import Path
 from typing import Collection
 
@@ -14,7 +14,7 @@ import pandas as pd
 from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.agents.rollout import Episode
 from hnsdt.envs.layout import Layout, equal_runs
-from hnsdt.evaluation.runs import Batch, EvalTask, run_here, evaluate_run, load_model
+from hnsdt.evaluation.runs import Batch, EvalTask, Evaluation, episode_id, load_model, rerun
 from hnsdt.evaluation.segments import layout_navigator, segment_facts
 from hnsdt.evaluation.tables import layout_summary
 
@@ -43,7 +43,9 @@ def layout_rows(task: EvalTask, batch: Batch, episodes: list[Episode]) -> tuple[
         for i, ep in enumerate(eps):
             ids = {"method": task.method, "seed": task.seed, "split": src.split, "layout": src.name,
                    "fail_prob": float(batch.fail_prob[run.start + i]), "episode": i % per_fail_prob}
-            rows.append(ids | {"success": bool(ep.success), "steps": ep.length, "reward": round(ep.ret, 6)})
+            name = episode_id(task.method, src.name, ids["fail_prob"], task.seed, ids["episode"])
+            rows.append(ids | {"episode_id": name, "success": bool(ep.success), "steps": ep.length,
+                               "reward": round(ep.ret, 6)})
             if ep.segments:
                 segments += [ids | row for row in segment_facts(ep, navigator, ids["fail_prob"])]
     return rows, segments
@@ -68,84 +70,77 @@ def layout_batches(seed: int, sources: tuple, fail_probs: tuple[float, ...], epi
     return tuple(batches)
 
 
-def evaluate_layouts(seeds: dict[str, list[int]], sources: tuple, fail_probs: tuple[float, ...],
-                     episodes: int, executors: dict[str, ExecutorConfig], epsilons: dict[str, float],
-                     models_root: str | Path, out_dir: str | Path, compute=None, progress: bool = True,
-                     splits: Collection[str] | None = None) -> pd.DataFrame:
-    """Every method (the keys of ``seeds``, in order) × its seeds on every source, ``episodes`` per layout and
-    fail_prob (a seed's episodes are drawn from the seed, whichever method runs them), the checkpoints of view models
-    at ``models_root/<method>/seed<K>``; write ``episodes.csv``, ``summary.csv`` (:func:`layout_summary`),
-    ``segments.csv`` and ``layouts.csv`` under ``out_dir``, with the exact optimum per layout and fail_prob.
-    ``splits``: only these splits' sources, with the episodes they have in the whole evaluation."""
-    from hnsdt.core.compute import Compute, run_tasks
-    from hnsdt.core.fileio import atomic_dir
-
+def layout_evaluation(seeds: dict[str, list[int]], sources: tuple, fail_probs: tuple[float, ...],
+                      episodes: int, executors: dict[str, ExecutorConfig], epsilons: dict[str, float],
+                      models_root: str | Path, splits: Collection[str] | None = None) -> Evaluation:
+    """The unseen layouts' :class:`~hnsdt.evaluation.runs.Evaluation`: every method (the keys of ``seeds``, in
+    order) × its seeds on every source, ``episodes`` per layout and fail_prob (a seed's episodes are drawn from the
+    seed, whichever method runs them), the checkpoints of view models at ``models_root/<method>/seed<K>``; it
+    writes ``episodes.csv``, ``summary.csv`` (:func:`hnsdt.evaluation.tables.layout_summary`), ``segments.csv``
+    and ``layouts.csv``, with the exact optimum per layout and fail_prob. ``splits``: only these splits' sources,
+    with the episodes they have in the whole evaluation."""
     tasks = [EvalTask(method, seed, executors[method], *load_model(Path(models_root) / method / f"seed{seed}", method,
                                                                    view=True),
                       epsilons.get(method, 0.0), layout_batches(seed, sources, fail_probs, episodes, splits),
                       layout_rows)
              for method, method_seeds in seeds.items() for seed in method_seeds]
-    results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate unseen layouts", progress=progress)
-    sources = tuple(s for s in sources if splits is None or s.split in splits)
+    kept = tuple(s for s in sources if splits is None or s.split in splits)
+    return Evaluation(tasks, partial(_write_tables, sources=kept, fail_probs=fail_probs),
+                      desc="evaluate unseen layouts")
+
+
+def _write_tables(tmp: Path, results: list, sources: tuple, fail_probs: tuple[float, ...]) -> pd.DataFrame:
+    """The unseen layouts' tables into ``tmp``, the exact optimum beside every episode."""
     table = pd.DataFrame([row for batches in results for rows, _ in batches for row in rows])
     segments = pd.DataFrame([row for batches in results for _, rows in batches for row in rows])
-    optimal = {(s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fail_probs}
-    table["optimal_steps"], table["optimal_success"] = zip(*(optimal[key]
-                                                            for key in zip(table.layout, table.fail_prob)))
-    with atomic_dir(Path(out_dir)) as tmp:
-        tmp.mkdir()
-        table.to_csv(tmp / "episodes.csv", index=False, float_format="%.6g")
-        layout_summary(table).to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
-        segments.to_csv(tmp / "segments.csv", index=False, float_format="%.6g")
-        layouts = pd.DataFrame([{"split": s.split, "layout": s.name, "rows": s.layout.shape[0],
-                                 "cols": s.layout.shape[1], "max_steps": s.max_steps} for s in sources])
-        layouts.to_csv(tmp / "layouts.csv", index=False)
+    optimal = {(s.split, s.name, fp): _optimum(s.layout, fp, s.max_steps) for s in sources for fp in fail_probs}
+    table["optimal_steps"], table["optimal_success"] = zip(*(optimal[key] for key in zip(
+        table.split, table.layout, table.fail_prob)))
+    table.to_csv(tmp / "episodes.csv", index=False, float_format="%.6g")
+    layout_summary(table).to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
+    segments.to_csv(tmp / "segments.csv", index=False, float_format="%.6g")
+    layouts = pd.DataFrame([{"split": s.split, "layout": s.name, "rows": s.layout.shape[0],
+                             "cols": s.layout.shape[1], "max_steps": s.max_steps} for s in sources])
+    layouts.to_csv(tmp / "layouts.csv", index=False)
     return table
 
 
-def layout_episode_id(method: str, seed: int, layout: str, fail_prob: float, episode: int) -> str:
-    """An unseen-layout episode's id: ``METHOD/seedK/LAYOUT/fpP/epI`` (the layout's name may hold slashes)."""
-    return f"{method}/seed{seed}/{layout}/fp{fail_prob:g}/ep{episode}"
-
-
-def layout_episode_recording(layout: str, fail_prob: float, episode: int, task: EvalTask, batch: Batch,
+def layout_episode_recording(split: str, layout: str, fail_prob: float, episode: int, task: EvalTask, batch: Batch,
                              episodes: list[Episode]) -> tuple[dict, dict]:
     """The ``rows`` of an unseen-layout task re-run for one of its episodes (:func:`rerun_layout_episode`): that
     episode's outcome, as ``episodes.csv`` has it, and its recordings."""
     from hnsdt.logs import record_from_episode, recording_files
 
     sources = batch.key[0]
-    k = [s.name for s in sources].index(layout)
+    k = [(s.split, s.name) for s in sources].index((split, layout))
     run = equal_runs(batch.copies, len(sources), "layouts")[k]
     first = next(i for i in range(run.start, run.stop) if batch.fail_prob[i] == fail_prob)
     ep = episodes[first + episode]
     meta = {"method": task.method, "seed": task.seed, "split": sources[k].split, "layout": layout,
             "fail_prob": fail_prob, "episode": episode}
-    rec = record_from_episode(layout_episode_id(task.method, task.seed, layout, fail_prob, episode), sources[k].layout,
+    rec = record_from_episode(episode_id(task.method, layout, fail_prob, task.seed, episode), sources[k].layout,
                               ep, meta | (task.provenance or {}))
     outcome = {"success": bool(ep.success), "steps": ep.length, "reward": round(ep.ret, 6)}
     return outcome, recording_files(rec, episode_index=episode)
 
 
 def rerun_layout_episode(sources: tuple, fail_probs: tuple[float, ...], episodes: int, models_root: str | Path,
-                         method: str, seed: int, executor: ExecutorConfig, epsilon: float, layout: str,
+                         method: str, seed: int, executor: ExecutorConfig, epsilon: float, split: str, layout: str,
                          fail_prob: float, episode: int, threads: int = 1,
                          provenance: dict | None = None) -> tuple[dict, dict]:
     """An unseen-layout episode made again: its method and seed on the maps of its split, stepped together from
-    the same seeds as :func:`evaluate_layouts` ran them (each map's seed is its place among ``sources``), so that
+    the same seeds as :func:`layout_evaluation` ran them (each map's seed is its place among ``sources``), so that
     the episode is the evaluation's to the bit; ``(its outcome, its .rrd and .mcap bytes)``."""
-    from functools import partial
-
-    src = next((s for s in sources if s.name == layout), None)
-    episode_id = layout_episode_id(method, seed, layout, fail_prob, episode)
+    src = next((s for s in sources if (s.split, s.name) == (split, layout)), None)
+    name = episode_id(method, layout, fail_prob, seed, episode)
     if src is None:
-        raise ValueError(f"{episode_id}: no layout {layout} among this evaluation's")
+        raise ValueError(f"{name}: no layout {layout} in split {split} among this evaluation's")
     if fail_prob not in fail_probs or not 0 <= episode < episodes:
-        raise ValueError(f"{episode_id}: not an episode of this evaluation (evaluate.fail_probs {list(fail_probs)}, "
+        raise ValueError(f"{name}: not an episode of this evaluation (evaluate.fail_probs {list(fail_probs)}, "
                          f"generalisation.episodes {episodes})")
     batch = next(b for b in layout_batches(seed, sources, fail_probs, episodes, {src.split})
-                 if layout in [s.name for s in b.key[0]])
+                 if src in b.key[0])
     model, meta = load_model(Path(models_root) / method / f"seed{seed}", method, view=True)
     task = EvalTask(method, seed, executor, model, meta, epsilon, (batch,),
-                    partial(layout_episode_recording, layout, fail_prob, episode), 0, provenance)
-    return run_here(task, threads)
+                    partial(layout_episode_recording, split, layout, fail_prob, episode), 0, provenance)
+    return rerun(task, threads)

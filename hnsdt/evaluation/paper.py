@@ -4,6 +4,7 @@ batched over environment copies, its tables and recordings; and any of its episo
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any, Callable
 
@@ -15,7 +16,7 @@ from hnsdt.agents.rollout import Episode, rollout
 from hnsdt.core.methods import ARMS, method as lookup_method
 from hnsdt.envs.layout import Layout, equal_runs
 from hnsdt.envs.vector import KeyDoorVectorEnv
-from hnsdt.evaluation.runs import (Batch, EvalTask, checkpoint_dir, evaluate_run, load_model, run_here,
+from hnsdt.evaluation.runs import (Batch, EvalTask, Evaluation, checkpoint_dir, episode_id, load_model, rerun,
                                    training_usage)
 from hnsdt.evaluation.segments import layout_navigator, segment_facts, training_segment_counts
 from hnsdt.evaluation.tables import add_optimum, metrics_json, summary
@@ -28,12 +29,8 @@ class Cell:
     fail_prob: float
     seed: int
 
-    @property
-    def key(self) -> str:
-        return f"{self.method}/{self.env}/fp{self.fail_prob:g}/seed{self.seed}"
-
     def episode_id(self, i: int) -> str:
-        return f"{self.key}/ep{i}"
+        return episode_id(self.method, self.env, self.fail_prob, self.seed, i)
 
 
 def cell_seed(cell: Cell, fail_index: int) -> int:
@@ -122,7 +119,7 @@ def cell_batches(method: str, env: str, seed: int, fail_probs, layout: Layout, m
 def cell_task(settings, envs: dict, executors: dict[str, ExecutorConfig], models_root: str | Path, method: str,
               env: str, seed: int, rows: Callable[..., Any] = cell_outputs, log_episodes: int = 0,
               provenance: dict | None = None) -> EvalTask:
-    """The paper protocol's task of one method × env × seed (:func:`evaluate_all`): its trained model and its one
+    """The paper protocol's task of one method × env × seed (:func:`paper_evaluation`): its trained model and its one
     batch, every fail_prob's cell."""
     model, meta = load_model(checkpoint_dir(models_root, env, method, seed), method, settings.device)
     batches = cell_batches(method, env, seed, settings.fail_probs, envs[env].layout, envs[env].max_steps,
@@ -131,14 +128,13 @@ def cell_task(settings, envs: dict, executors: dict[str, ExecutorConfig], models
                     settings.eval_epsilon.get(method, 0.0), batches, rows, log_episodes, provenance)
 
 
-def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], models_root: str | Path,
-                 out_dir: str | Path, datasets: str | Path, progress: bool = True,
-                 recordings_dir: str | Path | None = None,
-                 compute=None, provenance: dict | None = None) -> pd.DataFrame:
-    """Run every cell of ``settings`` (:class:`hnsdt.compose.config.EvaluateSettings`) on ``envs`` (name ->
-    :class:`hnsdt.compose.config.EnvSpec`) and ``compute``'s executor, write ``episodes.csv``, ``summary.csv``,
-    ``metrics.json`` under ``out_dir`` and the episode recordings (of the first seed) under ``recordings_dir``
-    (default: ``recordings`` beside ``out_dir``), each built in a temporary folder and moved into place when
+def paper_evaluation(settings, envs: dict, executors: dict[str, ExecutorConfig], models_root: str | Path,
+                     datasets: str | Path, recordings_dir: str | Path,
+                     provenance: dict | None = None) -> Evaluation:
+    """The paper protocol's :class:`~hnsdt.evaluation.runs.Evaluation`: every cell of ``settings``
+    (:class:`hnsdt.compose.config.EvaluateSettings`) on ``envs`` (name -> :class:`hnsdt.compose.config.EnvSpec`);
+    it writes ``episodes.csv``, ``summary.csv``, ``metrics.json`` and the other tables, and the episode
+    recordings (of the first seed) under ``recordings_dir``, built in a temporary folder and moved into place when
     complete. ``datasets``: the root of the collected datasets (Theorem 2's training segment counts).
 
     The recordings live apart from the tables because rerun stamps every row of an ``.rrd`` with a
@@ -146,17 +142,10 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
 
     ``executors`` holds the planner settings of each arm (``{"ours": ..., "paper": ...}``,
     :func:`hnsdt.compose.config.executor_config`)."""
-    import json
-
-    from hnsdt.core.compute import Compute, run_tasks
-    from hnsdt.core.fileio import atomic_dir
-    from hnsdt.logs import LAYOUT_NAME, write_layout
-
     missing = set(ARMS) - set(executors)
     if missing:
-        raise ValueError(f"evaluate_all: no planner settings for arm(s) {sorted(missing)}")
-    out = Path(out_dir)
-    rec_out = Path(recordings_dir) if recordings_dir is not None else out.parent / "recordings"
+        raise ValueError(f"paper_evaluation: no planner settings for arm(s) {sorted(missing)}")
+    rec_out = Path(recordings_dir)
     groups = [(m, e, s) for m in settings.methods for e in settings.envs for s in settings.seeds]
     tasks, params_count, usage = [], {}, []
     for method, env, seed in groups:
@@ -166,9 +155,19 @@ def evaluate_all(settings, envs: dict, executors: dict[str, ExecutorConfig], mod
         if tasks[-1].model is not None:
             params_count[f"{env}/{method}"] = sum(p.numel() for p in tasks[-1].model.parameters())
             usage.append(training_usage(models_root, env, method, seed))
-    results = run_tasks(evaluate_run, tasks, compute or Compute(), desc="evaluate", progress=progress)
-    with atomic_dir(out) as tmp, atomic_dir(rec_out) as rec_tmp:
-        tmp.mkdir()
+    return Evaluation(tasks, partial(_write_tables, settings=settings, envs=envs, groups=groups, rec_out=rec_out,
+                                     datasets=Path(datasets), usage=usage, params_count=params_count))
+
+
+def _write_tables(tmp: Path, results: list, settings, envs: dict, groups: list, rec_out: Path, datasets: Path,
+                  usage: list, params_count: dict) -> pd.DataFrame:
+    """The paper protocol's tables into ``tmp``, and its recordings into ``rec_out`` (whole or absent)."""
+    import json
+
+    from hnsdt.core.fileio import atomic_dir
+    from hnsdt.logs import LAYOUT_NAME, write_layout
+
+    with atomic_dir(rec_out) as rec_tmp:
         rec_tmp.mkdir()
         write_layout(rec_tmp / LAYOUT_NAME)  # Foxglove: Layouts -> Import, then open any .mcap below
         rows, seg_rows = [], []
@@ -222,14 +221,12 @@ def episode_recording(cell_index: int, episode: int, task: EvalTask, batch: Batc
 def rerun_episode(settings, envs: dict, executors: dict[str, ExecutorConfig], models_root: str | Path, cell: Cell,
                   episode: int, threads: int = 1, provenance: dict | None = None) -> tuple[dict, dict]:
     """An evaluated episode made again, for an episode that was not recorded: its method × env × seed run as
-    :func:`evaluate_all` ran it (every fail_prob's episodes stepped together from the same seeds, ``threads`` torch
+    :func:`paper_evaluation` ran it (every fail_prob's episodes stepped together from the same seeds, ``threads`` torch
     threads), so that the episode is the evaluation's to the bit; ``(its outcome, its .rrd and .mcap bytes)``."""
-    from functools import partial
-
     if cell.fail_prob not in settings.fail_probs or not 0 <= episode < settings.episodes:
         raise ValueError(f"{cell.episode_id(episode)}: not an episode of this evaluation (evaluate.fail_probs "
                          f"{list(settings.fail_probs)}, evaluate.episodes {settings.episodes})")
     rows = partial(episode_recording, settings.fail_probs.index(cell.fail_prob), episode)
     task = cell_task(settings, envs, executors, models_root, cell.method, cell.env, cell.seed, rows,
                      provenance=provenance)
-    return run_here(task, threads)
+    return rerun(task, threads)

@@ -1,6 +1,8 @@
 """What both experiments' evaluations run on: a trained model loaded as its method's agent, and :class:`EvalTask`
 (one method and training seed, every :class:`Batch` it rolls out), which :func:`evaluate_run` runs touching no
-file, so any executor (:mod:`hnsdt.core.compute`) can run it. The paper protocol (:mod:`.paper`) and the
+file, so any executor (:mod:`hnsdt.core.compute`) can run it. Both experiments evaluate through
+:func:`evaluate` (an :class:`Evaluation`: tasks, and how their rows become tables), make an episode again
+through :func:`rerun`, and name an episode by :func:`episode_id`; the paper protocol (:mod:`.paper`) and the
 unseen layouts (:mod:`.layouts`) differ only in the batches they plan and the rows they write.
 
 Metrics follow the paper: success rate, mean steps of the successful episodes, mean reward (episode return);
@@ -20,6 +22,12 @@ from hnsdt.core.methods import method as lookup_method
 from hnsdt.implementations import code_of, resolve
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv, Streams
+
+
+def episode_id(method: str, layout: str, fail_prob: float, seed: int, episode: int) -> str:
+    """An evaluated episode's id, in both experiments: ``METHOD/LAYOUT/fpP/seedK/epI`` (LAYOUT: a paper map's
+    env name, or an unseen layout's name, e.g. a drawn map's file name)."""
+    return f"{method}/{layout}/fp{fail_prob:g}/seed{seed}/ep{episode}"
 
 
 def checkpoint_dir(models_root: str | Path, env: str, method: str, seed: int) -> Path:
@@ -110,9 +118,32 @@ def evaluate_run(task: EvalTask) -> list:
     return [task.rows(task, batch, run_batch(task, batch)) for batch in task.batches]
 
 
-def run_here(task: EvalTask, threads: int) -> tuple[dict, dict]:
-    """A re-run's one task in this process, through the pickles and thread count a worker's runs have: the
-    ``(outcome, files)`` its ``rows`` made of its one batch."""
+@dataclass(frozen=True)
+class Evaluation:
+    """One experiment's evaluation: its tasks, and how their results become its tables (``write(folder,
+    results)``: ``results`` holds each task's rows of each batch; returns the episode table)."""
+
+    tasks: list[EvalTask]
+    write: Callable[[Path, list], Any]
+    desc: str = "evaluate"
+
+
+def evaluate(evaluation: Evaluation, out: str | Path, compute=None, progress: bool = True):
+    """Every task of ``evaluation`` on ``compute``'s executor, its tables written into ``out``, which is whole or
+    absent (built in a temporary folder and moved into place); the episode table."""
+    from hnsdt.core.compute import Compute, run_tasks
+    from hnsdt.core.fileio import atomic_dir
+
+    results = run_tasks(evaluate_run, evaluation.tasks, compute or Compute(), desc=evaluation.desc,
+                        progress=progress)
+    with atomic_dir(Path(out)) as tmp:
+        tmp.mkdir()
+        return evaluation.write(tmp, results)
+
+
+def rerun(task: EvalTask, threads: int) -> tuple[dict, dict]:
+    """An evaluated episode made again: its task (its batch alone, ``rows`` picking the episode) in this process,
+    through the pickles and thread count a worker's runs have: the ``(outcome, files)`` of that episode."""
     from hnsdt.core.compute import Compute, run_tasks
 
     ((outcome, files),), = run_tasks(evaluate_run, [task], Compute(workers=1, threads=threads), progress=False)

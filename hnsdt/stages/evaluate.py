@@ -16,7 +16,8 @@ def evaluate(params: Params, models: Path, datasets: Path, out: Path, recordings
     import shutil
 
     from hnsdt.compose.config import env_spec, evaluate_settings, executor_config
-    from hnsdt.evaluation.paper import evaluate_all
+    from hnsdt.evaluation.paper import paper_evaluation
+    from hnsdt.evaluation.runs import evaluate as run_evaluation
     from hnsdt.evaluation.tables import summary
     from hnsdt.core.fileio import atomic_file
     from hnsdt.core.methods import ARMS
@@ -24,9 +25,10 @@ def evaluate(params: Params, models: Path, datasets: Path, out: Path, recordings
     settings = evaluate_settings(params)
     envs = {e: env_spec(params, e) for e in settings.envs}
     executors = {arm: executor_config(params, arm) for arm in ARMS}
-    table = evaluate_all(settings, envs, executors, models, out, datasets, progress=progress,
-                         recordings_dir=recordings, compute=compute or compute_settings(params),
-                         provenance=provenance(params))
+    plan = paper_evaluation(settings, envs, executors, models, datasets,
+                            recordings if recordings is not None else Path(out).parent / "recordings",
+                            provenance(params))
+    table = run_evaluation(plan, out, compute or compute_settings(params), progress)
     if metrics is not None:
         for name in ("summary.csv", "metrics.json"):
             with atomic_file(Path(metrics) / name) as tmp:

@@ -17,7 +17,8 @@ def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progr
     from hnsdt.compose import generalisation as gen
     from hnsdt.compose.config import eval_epsilon, layout_executor
     from hnsdt.core.methods import REFERENCE
-    from hnsdt.evaluation.layouts import evaluate_layouts
+    from hnsdt.evaluation.layouts import layout_evaluation
+    from hnsdt.evaluation.runs import evaluate
 
     g = params.need("generalisation")
     fps = tuple(float(f) for f in params.need("evaluate").fail_probs)
@@ -32,9 +33,9 @@ def evaluate_unseen(params: Params, models: Path, out: Path, compute=None, progr
         raise ValueError(f"--methods: {', '.join(unknown)} not learned here (the experiment's: {', '.join(g.learned)})")
     gen.check_sources(sources, max(fps))
     evaluated = [*(m for m in g.learned if not methods or m in methods), REFERENCE]
-    table = evaluate_layouts({m: g.seeds_of(m) for m in evaluated}, sources, fps, g.episodes,
+    plan = layout_evaluation({m: g.seeds_of(m) for m in evaluated}, sources, fps, g.episodes,
                              {m: layout_executor(params, m) for m in evaluated},  # (generalisation.operators)
-                             {m: eval_epsilon(params, m) for m in evaluated}, models, out,
-                             compute or compute_settings(params), progress, splits or None)
+                             {m: eval_epsilon(params, m) for m in evaluated}, models, splits or None)
+    table = evaluate(plan, out, compute or compute_settings(params), progress)
     print(f"wrote {out}/episodes.csv ({len(table)} episodes), summary.csv, segments.csv, layouts.csv")
     return table

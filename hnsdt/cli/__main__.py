@@ -1,0 +1,7 @@
+"""``python -m hnsdt.cli``: the ``hnsdt`` command."""
+
+import sys
+
+from hnsdt.cli import main
+
+sys.exit(main())
