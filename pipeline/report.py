@@ -2,7 +2,7 @@
 metrics (hnsdt.stages.report).
 
 Usage: python pipeline/report.py --results results --generalisation generalisation/results --out report
-       --headline metrics/headline.json --ablations benchmarks/results/generalisation.csv
+       --headline metrics/headline --ablations benchmarks/results/generalisation.csv
        --experiments generalisation/experiments
 """
 

@@ -1120,7 +1120,7 @@ def test_the_validation_measure_acts_on_its_maps_side_by_side():
     """StepsToExit steps its validation maps as one batch (as many starts each): the mean of each map run alone
     (here with the planner's own controllers, whose steps differ from map to map)."""
     from hnsdt.agents.executor import ExecutorConfig
-    from hnsdt.compose.training import StepsToExit
+    from hnsdt.evaluation.validation import StepsToExit
 
     layouts = [generate("keydoor_maze", s) for s in (3, 4)] + [generate("keydoor", 5)]
     measure = StepsToExit.on_layouts(layouts, 60, 6, "symbolic", ExecutorConfig(), {})

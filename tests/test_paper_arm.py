@@ -163,7 +163,7 @@ def test_the_steps_measure_acts_from_held_out_states_and_keys_the_record(keydoor
     fail_prob 0, the same value on every call; training records it as ``validation_steps``."""
     from hnsdt.compose.config import EnvSpec
     from hnsdt.models.train import train_decision_transformer, validation_episodes
-    from hnsdt.compose.training import StepsToExit
+    from hnsdt.evaluation.validation import StepsToExit
 
     frames, _ = _random_walk_frames(keydoor, 12)
     held = validation_episodes(frames, 0.25)

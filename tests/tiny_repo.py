@@ -21,8 +21,13 @@ ENV = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")
 STAGES = {m: METHODS[m].stage for m in LEARNED}  # learned method of the paper protocol -> its DVC stage
 _GENERALISATION = yaml.safe_load((REPO / "params.yaml").read_text())["generalisation"]
 UNSEEN = _GENERALISATION["methods"] + _GENERALISATION["baselines"]  # learned methods of the unseen-layout experiment
-GIT_TRACKED_OUTS = {"metrics/summary.csv", "metrics/metrics.json", "metrics/headline.json"}  # outputs with
+GIT_TRACKED_OUTS = {"metrics/summary.csv", "metrics/metrics.json", "metrics/headline"}  # outputs with
 # `cache: false`: in git, and changed by a run with other params
+
+
+def kept_in_git(path: str) -> bool:
+    """Whether a path `git status` names is the lock file or one of :data:`GIT_TRACKED_OUTS` (or in one)."""
+    return path == "dvc.lock" or any(path == out or path.startswith(out + "/") for out in GIT_TRACKED_OUTS)
 
 
 def copy_repo(dst: Path) -> None:

@@ -1,5 +1,5 @@
 """The README's results tables, generated from the files of the run that git keeps: the per-cell table from
-the evaluation summary (`metrics/summary.csv`), the headline table from `metrics/headline.json`.
+the evaluation summary (`metrics/summary.csv`), the headline table from `metrics/headline/` (a file per split).
 
 Usage: python tools/readme_results.py [--check]
 Rewrites the tables between the `<!-- results:begin -->` / `<!-- results:end -->` and `<!-- headline:begin -->` /
@@ -11,7 +11,6 @@ disagree with the run.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -21,6 +20,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from hnsdt.core.methods import METHODS  # noqa: E402
+from hnsdt.report.headline import read_headline  # noqa: E402
 
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
 HEADLINE = "<!-- headline:begin -->", "<!-- headline:end -->"
@@ -89,13 +89,13 @@ def main() -> int:
     parser.add_argument("--check", action="store_true", help="only check; exit 1 when the README differs")
     args = parser.parse_args()
     readme_path, summary_path, headline_path = (ROOT / "README.md", ROOT / "metrics/summary.csv",
-                                                ROOT / "metrics/headline.json")
+                                                ROOT / "metrics/headline")
     readme = readme_path.read_text()
     wanted = render(readme, results_table(pd.read_csv(summary_path)))
-    wanted = render(wanted, headline_table(json.loads(headline_path.read_text())), HEADLINE)
+    wanted = render(wanted, headline_table(read_headline(headline_path)), HEADLINE)
     if args.check:
         if wanted != readme:
-            print("README.md: a results table differs from metrics/summary.csv or metrics/headline.json; run "
+            print("README.md: a results table differs from metrics/summary.csv or metrics/headline/; run "
                   "`python tools/readme_results.py`", file=sys.stderr)
             return 1
         return 0

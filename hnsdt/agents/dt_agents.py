@@ -3,10 +3,9 @@
 How a model decides depends on its formulation (:mod:`hnsdt.models.dt`). Window: per environment copy, the
 last ``h`` steps of (state, action, timestep) as the model's window, left-padded exactly as in training; only
 copies that need a decision are run through the model, and identical windows only once (episodes of one cell
-start alike and stay alike until an action fails: at fail_prob 0 all of them; this saved 45% of the
-evaluation's time when measured). Episode: one new token per copy and step through the model's key/value
-cache, copies with identical histories so far computed once (the evaluation's decision transformers: 97 s → 67 s
-in one process on a 2-core AMD EPYC, the same actions). Actions are the argmax of the action distribution.
+start alike and stay alike until an action fails: at fail_prob 0 all of them). Episode: one new token per copy and
+step through the model's key/value cache, copies with identical histories so far computed once (the same actions,
+in less time). Actions are the argmax of the action distribution.
 """
 
 from __future__ import annotations

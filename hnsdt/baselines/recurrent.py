@@ -34,8 +34,8 @@ class RecurrentTrainConfig:
     symmetries: int = 1  # each episode, every epoch anew, on its map turned at random (view networks only;
     #                      hnsdt.models.view.turned_maps)
     patience: int = 0  # > 0: stop once the steps to the exit on validation layouts (the unseen-layout
-    #                    experiment's; hnsdt.compose.training.StepsToExit) have not improved for this many epochs, keeping
-    #                    the best epoch's weights; `epochs` is then the cap. 0: train every epoch
+    #                    experiment's; hnsdt.evaluation.validation.StepsToExit) have not improved for this many
+    #                    epochs, keeping the best epoch's weights; `epochs` is then the cap. 0: train every epoch
     starts: int = 64  # with patience: about this many start states, spread over the validation layouts
 
 
@@ -67,7 +67,7 @@ def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTr
     """Train from scratch (or on from ``state``); returns the model (eval mode), its curve and the data used,
     or a :class:`~hnsdt.models.fit.FitState` when ``stop_after`` epochs come before the end. With
     ``cfg.patience``, training stops at the plateau of ``measure(model)`` (lower is better, e.g.
-    :class:`hnsdt.compose.training.StepsToExit`), which the data used then records per epoch."""
+    :class:`hnsdt.evaluation.validation.StepsToExit`), which the data used then records per epoch."""
     starts, lengths = training_episodes(frames, cfg.behaviours)
     if len(starts) == 0:
         raise ValueError(f"no training episodes from behaviours {list(cfg.behaviours) or 'any'} in the dataset")

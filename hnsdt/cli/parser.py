@@ -124,7 +124,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "without it the report has no such section")
     p.add_argument("--out", default="report")
     p.add_argument("--headline", help="also write the headline metrics (success per method and split, HNSDT's "
-                   "steps / optimum) as JSON here, e.g. metrics/headline.json")
+                   "steps / optimum) into this folder, one JSON file per split, e.g. metrics/headline")
     p.add_argument("--ablations", help="measured variants of the unseen-layout experiment (e.g. "
                    "benchmarks/results/generalisation.csv, written by benchmarks/generalisation.py --record): "
                    "the report's ablation table and scaling figure")

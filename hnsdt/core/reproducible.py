@@ -1,19 +1,18 @@
-"""Same seed, same bytes — on one machine, and across x86-64 machines as far as measured (docs/reproducibility.md:
-two AMD EPYCs, with and without AVX-512, gave the same bytes; an Intel Xeon gave other ones while MKL and oneDNN
-still computed parts of the networks — products until 907d602, elementwise maths until 01ac17a —, which now only
-the LSTM and GRU baselines' training does).
+"""Same seed, same bytes — on one machine, and across x86-64 machines as far as measured (docs/reproducibility.md
+says which machines gave which bytes; MKL and oneDNN, whose results follow the CPU's vendor, now compute only the
+LSTM and GRU baselines' training).
 
-Seeding fixes the random streams; the numerics still depend on which kernels the CPU runs. Measured with
-``benchmarks/cpu_determinism.py`` (a DT and an option-critic trained for a few steps, weights hashed), each of
-these alone changes the trained bytes, so each is pinned for every process of the pipeline and the tests:
+Seeding fixes the random streams; the numerics still depend on which kernels the CPU runs. Each of these alone
+changes the trained bytes (``benchmarks/cpu_determinism.py`` trains a DT and an option-critic for a few steps and
+hashes the weights), so each is pinned for every process of the pipeline and the tests:
 
 * ``ATEN_CPU_CAPABILITY=avx2`` — torch's own vectorised kernels (layer norm, softmax, reductions) otherwise
   pick AVX-512 where the CPU has it and AVX2 where it does not;
 * ``MKL_CBWR=COMPATIBLE`` — MKL's conditional numerical reproducibility. MKL dispatches its GEMMs and vector
   maths (torch's CPU ``erf``, ``exp``, ``tanh``, ``sqrt``) by vendor and ISA; per Intel's documentation only
   ``COMPATIBLE`` (SSE2 without approximate reciprocals) gives the same results on Intel and AMD processors alike
-  (``AVX2`` is silently ignored on AMD) — measured not to hold, so only the LSTM and GRU still compute there;
-* ``DNNL_MAX_CPU_ISA=AVX2`` — oneDNN's JIT kernels (torch's GELU until 907d602; convolutions) likewise;
+  (``AVX2`` is silently ignored on AMD) — not so in our runs, so only the LSTM and GRU still compute there;
+* ``DNNL_MAX_CPU_ISA=AVX2`` — oneDNN's JIT kernels (convolutions) likewise;
 * ``OPENBLAS_CORETYPE=Haswell`` — NumPy's OpenBLAS, which computes the decision transformers' and Q-networks'
   products (:mod:`hnsdt.models.kernels`: about 2× MKL's ``COMPATIBLE`` code's throughput), picks its kernels by
   core type, not vendor: pinned to its AVX2/FMA kernels, which every machine of this project has (on one thread,
@@ -22,10 +21,9 @@ these alone changes the trained bytes, so each is pinned for every process of th
   cores, so 2 threads is also torch's default here;
 * ``PYTHONHASHSEED=0`` — lerobot orders task lists through Python sets, whose order follows the string hash.
 
-The price, measured on a 2-core Intel Xeon (``benchmarks/cpu_determinism.py``): decision-transformer training
-steps about 1.1–1.3× slower (about 3× while their linear layers ran on MKL's ``COMPATIBLE`` code), option-critic
-training about 1.1×. ``HNSDT_CPU=native`` skips the pinning (:data:`ALWAYS` excepted) for speed, at the cost of
-results that depend on the CPU that made them.
+The price is some speed (``benchmarks/cpu_determinism.py`` measures it; docs/reproducibility.md has the figures).
+``HNSDT_CPU=native`` skips the pinning (:data:`ALWAYS` excepted) for speed, at the cost of results that depend on
+the CPU that made them.
 """
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ import pandas as pd  # noqa: E402
 from hnsdt.core.fileio import atomic_file  # noqa: E402
 from hnsdt.core.methods import LEARNED, METHODS, PROPOSED  # noqa: E402
 
-# reference: the row the others change (40 maps as collected, GoTo operators: the default until 606ecae)
+# reference: the row the others change (40 maps as collected, GoTo operators)
 INGREDIENTS = ("reference", "encoder", "maps", "augmentation", "relabelling", "family", "operators")
 COLUMNS = [  # one row per variant x method x split
     "variant", "ingredient", "family", "train_layouts", "episodes_per_map", "encoder", "relabel_rounds", "seeds",

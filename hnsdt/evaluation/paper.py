@@ -109,7 +109,7 @@ def cell_batches(method: str, env: str, seed: int, fail_probs, layout: Layout, m
                  episodes: int) -> tuple[Batch, ...]:
     """The paper protocol's batch of one method × env × seed: a cell of ``episodes`` copies per fail_prob, each
     cell with its own env seed (:func:`cell_seed`), stepped together — the same episodes as a batch per cell,
-    with one agent call per step for all (about 40 % less time for the transformers, measured)."""
+    with one agent call per step for all (less time for the transformers)."""
     cells = tuple(Cell(method, env, fp, seed) for fp in fail_probs)
     per_copy = tuple(float(c.fail_prob) for c in cells for _ in range(episodes))
     seeds = tuple(cell_seed(cell, fi) for fi, cell in enumerate(cells))

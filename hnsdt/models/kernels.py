@@ -1,15 +1,13 @@
 """The learned networks' matrix products and elementwise functions on kernels pinned by name, not by vendor.
 
 Why: a model's bytes depend on the kernels that computed it. torch's CPU GEMMs are MKL's, which dispatches by
-vendor and ISA, so the pipeline pins them to ``MKL_CBWR=COMPATIBLE`` (:mod:`hnsdt.core.reproducible`): SSE2
-code — on the Intel Xeon of this project 11–14 GMAC/s on a (100 × 128) · (128 × 512) product on one thread,
-against 55–63 for MKL's native kernels — and even so an AMD EPYC and an Intel Xeon trained other weights from the
-same seeds (docs/reproducibility.md). NumPy's OpenBLAS picks its kernels by core type, and
-``OPENBLAS_CORETYPE=Haswell`` (pinned beside MKL's setting) runs the same AVX2/FMA kernels with the same blocking on
-any x86-64 CPU that has AVX2, Intel or AMD: 21–28 GMAC/s on that product, about 2× the pinned MKL
-(``benchmarks/cpu_determinism.py``). torch's GELU runs on oneDNN's JIT code, chosen by ISA, and its elementwise
-``erf``, ``exp``, ``log``, ``tanh`` and ``sqrt`` on MKL's vector maths (VML), whose bytes follow MKL's mode and the
-CPU's vendor (measured on an Intel Xeon, where an AMD EPYC had shown no difference).
+vendor and ISA, so the pipeline pins them to ``MKL_CBWR=COMPATIBLE`` (:mod:`hnsdt.core.reproducible`): slow SSE2
+code, and even so AMD and Intel CPUs trained other weights from the same seeds (docs/reproducibility.md). NumPy's
+OpenBLAS picks its kernels by core type, and ``OPENBLAS_CORETYPE=Haswell`` (pinned beside MKL's setting) runs the
+same AVX2/FMA kernels with the same blocking on any x86-64 CPU that has AVX2, Intel or AMD, faster than the pinned
+MKL (``benchmarks/cpu_determinism.py`` measures both). torch's GELU runs on oneDNN's JIT code, chosen by ISA, and its
+elementwise ``erf``, ``exp``, ``log``, ``tanh`` and ``sqrt`` on MKL's vector maths (VML), whose bytes follow MKL's
+mode and the CPU's vendor.
 
 :func:`linear` (and :class:`Linear`, an ``nn.Linear`` computed by it), :func:`matmul` and :func:`attention` are
 torch's products computed there, forward and backward (autograd functions), for CPU tensors; :func:`gelu` is the
@@ -184,7 +182,7 @@ class _GELU(torch.autograd.Function):
 def gelu(x: torch.Tensor) -> torch.Tensor:
     """``F.gelu(x)`` (the exact, erf form), forward and backward on torch's own vectorised kernel for CPU tensors:
     ``F.gelu`` runs oneDNN's JIT code (bytes by ISA), and ``torch.erf`` MKL's vector maths (bytes by MKL's mode
-    and the CPU's vendor: ``MKL_CBWR`` changed them on an Intel Xeon)."""
+    and the CPU's vendor)."""
     if x.device.type != "cpu":
         return F.gelu(x)
     return _GELU.apply(x)
@@ -200,8 +198,7 @@ def tanh(x: torch.Tensor) -> torch.Tensor:
 
 def sqrt(x: torch.Tensor) -> torch.Tensor:
     """``torch.sqrt(x)``, correctly rounded (NumPy's, the IEEE square root every x86-64 CPU computes alike) for CPU
-    tensors: torch's runs MKL's vector maths, which rounded 0.6 % of float32 roots otherwise on an Intel Xeon, 17 %
-    under ``MKL_CBWR=COMPATIBLE``."""
+    tensors: torch's runs MKL's vector maths, which round some float32 roots otherwise, by CPU and MKL mode."""
     if x.device.type != "cpu":
         return torch.sqrt(x)
     return torch.from_numpy(np.sqrt(_array(x))).reshape(x.shape)

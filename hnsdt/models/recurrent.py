@@ -130,9 +130,9 @@ class RecurrentPolicy(Network, arch="recurrent", config=RecurrentConfig):
 
 # What a group of episodes costs a cell's recurrent layers, in episode-steps (:func:`length_groups`): its rows times
 # its longest length, plus (per time step, rows' worth; per group, episode-steps' worth) the fixed work of oneDNN's
-# calls. None: one padded pass. Chosen from `python benchmarks/recurrent_groups.py` on the pipeline's batches (LSTM
-# 3 x 256, GRU 2 x 128, batch 16, one thread, an Intel Xeon): they decide only how a batch is split — the speed and
-# the gradient's rounding —, so they are constants, the same on every machine.
+# calls. None: one padded pass. Chosen with `python benchmarks/recurrent_groups.py` on the pipeline's batches: they
+# decide only how a batch is split — the speed and the gradient's rounding —, so they are constants, the same on
+# every machine.
 GROUP_COSTS = {"lstm": (4, 150), "gru": None}
 
 

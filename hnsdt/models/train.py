@@ -81,8 +81,9 @@ def objective_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, part: s
 
 
 def validation_for(frames: Frames, model_cfg: DTConfig, cfg: TrainConfig, measure=None) -> Validation | None:
-    """The stopping measure: ``measure(model)`` if given (lower is better; e.g. :class:`hnsdt.compose.training.StepsToExit`),
-    else, when ``cfg.validation`` > 0, the loss on the held-out episodes."""
+    """The stopping measure: ``measure(model)`` if given (lower is better; e.g.
+    :class:`hnsdt.evaluation.validation.StepsToExit`), else, when ``cfg.validation`` > 0, the loss on the held-out
+    episodes."""
     if measure is None and cfg.validation <= 0:
         return None
     if measure is None:

@@ -1,8 +1,15 @@
-"""The headline metrics that ``dvc metrics show`` and ``dvc exp show`` compare."""
+"""The headline metrics that ``dvc metrics show`` and ``dvc exp show`` compare: a folder of one small JSON file
+per split (``metrics/headline/keydoor.json``: every learned method's success, HNSDT's steps / optimum), so that
+``dvc metrics show`` prints one row per split and one column per method, about 150 characters wide."""
 
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import pandas as pd
+
+from hnsdt.core.fileio import atomic_dir
 
 from hnsdt.core.methods import METHODS, PROPOSED
 from hnsdt.report.common import methods_in
@@ -35,3 +42,26 @@ def headline_metrics(summ: pd.DataFrame, unseen: pd.DataFrame | None = None,
             if ratio is not None:
                 out[name][f"{PROPOSED}_steps_ratio"] = ratio
     return out
+
+
+def _order(split: str) -> tuple:
+    """The paper envs first, then the unseen-layout splits, then the further experiments' (``NAME.heldout``)."""
+    if split in HEADLINE_SPLITS:
+        return (1, HEADLINE_SPLITS.index(split), "")
+    return (2 if "." in split else 0, 0, split)
+
+
+def write_headline(metrics: dict, folder: Path) -> None:
+    """:func:`headline_metrics` as ``folder/<split>.json``, replacing the folder whole (atomically)."""
+    with atomic_dir(folder) as tmp:
+        tmp.mkdir(parents=True)
+        for split, values in metrics.items():
+            (tmp / f"{split}.json").write_text(json.dumps(values, indent=2) + "\n")
+
+
+def read_headline(folder: Path) -> dict:
+    """``split -> {metric: value}`` from a folder :func:`write_headline` wrote, in the report's order."""
+    files = sorted(Path(folder).glob("*.json"), key=lambda f: _order(f.stem))
+    if not files:
+        raise FileNotFoundError(f"{folder}: no headline metrics (run `dvc repro report`)")
+    return {f.stem: json.loads(f.read_text()) for f in files}

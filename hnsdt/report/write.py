@@ -16,7 +16,7 @@ from hnsdt.core.provenance import git_revision, params_digest
 from hnsdt.report.claims import BOOTSTRAP, SOLVED, claim_lines, paper_claims, seed_lines, seed_view
 from hnsdt.report.common import label, lock_outputs, render_template
 from hnsdt.report.figures import comparison_figure, environment_figure, heatmap_figure, paradigm_figure, regret_figure
-from hnsdt.report.headline import headline_metrics
+from hnsdt.report.headline import headline_metrics, write_headline
 from hnsdt.report.paper_arm import paper_arm_lines
 from hnsdt.report.tables import optimum_table, results_table, paper_target_lines, usage_lines
 from hnsdt.report.theorems import theorem_sections
@@ -28,8 +28,8 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
                  ablations: Path | None = None, experiments: Path | None = None) -> Path:
     """``generalisation``: the unseen-layout experiment's results folder (its section is left out without one);
     ``experiments``: the folder of the further ones (``unseen_experiments``: each in ``experiments``/NAME);
-    ``headline``: where to write :func:`headline_metrics` as JSON; ``ablations``: the measured variants of that
-    experiment (:mod:`hnsdt.evaluation.ablations`; its table and scaling figure are left out without one)."""
+    ``headline``: the folder to write :func:`headline_metrics` into (one JSON file per split); ``ablations``: the
+    measured variants of that experiment (:mod:`hnsdt.evaluation.ablations`; its table and scaling figure are left out without one)."""
     summary_path = results / "summary.csv"
     if not summary_path.is_file():
         raise FileNotFoundError(f"{summary_path}: no evaluation summary (run `dvc repro evaluate`)")
@@ -100,11 +100,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
         (tmp / "provenance.json").write_text(json.dumps(
             {"git_revision": rev, "params_digest": digest, "inputs": inputs}, indent=2, sort_keys=True) + "\n")
         if headline is not None:
-            from hnsdt.core.fileio import atomic_file
-
             unseen_summary = pd.read_csv(generalisation / "summary.csv") if generalisation is not None else None
             further_summaries = {e["name"]: e["summary"] for e in further}
-            with atomic_file(headline) as tmp_headline:
-                tmp_headline.write_text(json.dumps(headline_metrics(summ, unseen_summary, further_summaries),
-                                                   indent=2) + "\n")
+            write_headline(headline_metrics(summ, unseen_summary, further_summaries), headline)
     return out / "report.md"
