@@ -263,3 +263,19 @@ def test_rendered_frames_load_in_stock_lerobot_and_its_visualizer(tmp_path, keyd
     shown = subprocess.run([str(Path(sys.executable).parent / "rerun"), "rrd", "print", str(rrd[0])],
                            capture_output=True, text=True)
     assert "observation.image" in shown.stdout + shown.stderr
+
+
+def test_the_docs_dataset_snippets_load_a_dataset_without_noise(small_dataset, tmp_path):
+    """The README's and docs/datasets.md's stock-LeRobot snippets, run as a user would (a fresh process), load a
+    collected dataset and print nothing on stderr (LeRobot's default video backend, torchcodec, prints ~100 lines
+    of tracebacks where FFmpeg's shared libraries are missing)."""
+    import re
+
+    for page in ("README.md", "docs/datasets.md"):
+        blocks = re.findall(r"```python\n(.*?)```", (Path(REPO) / page).read_text(), re.S)
+        snippet = next(b for b in blocks if "LeRobotDataset(" in b)
+        code = snippet.replace("data/datasets/keydoor", str(small_dataset)) + "\nprint(len(ds))\n"
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=tmp_path,
+                             env={**os.environ, "HF_HOME": str(tmp_path / "hf")})
+        assert out.returncode == 0 and int(out.stdout.split()[-1]) > 0, (page, out.stderr[-2000:])
+        assert out.stderr == "", (page, out.stderr[:2000])

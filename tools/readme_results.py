@@ -1,11 +1,12 @@
-"""The README's results tables, generated from the files of the run that git keeps: the per-cell table from
-the evaluation summary (`metrics/summary.csv`), the headline table from `metrics/headline/` (a file per split).
+"""The results tables of the README and docs/results.md, generated from the files of the run that git keeps: the
+README's headline from `metrics/headline/` (a file per split), the per-cell table of docs/results.md from the
+evaluation summary (`metrics/summary.csv`).
 
 Usage: python tools/readme_results.py [--check]
-Rewrites the tables between the `<!-- results:begin -->` / `<!-- results:end -->` and `<!-- headline:begin -->` /
-`<!-- headline:end -->` markers of README.md, or with --check exits 1 (one line) when the README's tables are
-not the ones the committed files give. ``tests/test_readme.py`` runs the check, so the README cannot silently
-disagree with the run.
+Rewrites the tables between the `<!-- headline:begin -->` / `<!-- headline:end -->` markers of README.md and the
+`<!-- results:begin -->` / `<!-- results:end -->` markers of docs/results.md, or with --check exits 1 (one line)
+when a table is not the one the committed files give. ``tests/test_readme.py`` runs the check, so neither page
+can silently disagree with the run.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from hnsdt.report.headline import read_headline  # noqa: E402
 
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
 HEADLINE = "<!-- headline:begin -->", "<!-- headline:end -->"
+RESULTS_PAGE = "docs/results.md"  # the per-cell table's page (the README holds the headline)
 CASES = {"keydoor": "Case 1 keydoor", "multikeydoor": "Case 2 multikeydoor"}
 SPLITS = {"heldout": "held-out maps", "minigrid": "MiniGrid grids", "drawn": "hand-drawn maps"}
 
@@ -88,18 +90,18 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--check", action="store_true", help="only check; exit 1 when the README differs")
     args = parser.parse_args()
-    readme_path, summary_path, headline_path = (ROOT / "README.md", ROOT / "metrics/summary.csv",
-                                                ROOT / "metrics/headline")
-    readme = readme_path.read_text()
-    wanted = render(readme, results_table(pd.read_csv(summary_path)))
-    wanted = render(wanted, headline_table(read_headline(headline_path)), HEADLINE)
-    if args.check:
-        if wanted != readme:
-            print("README.md: a results table differs from metrics/summary.csv or metrics/headline/; run "
+    pages = {ROOT / "README.md": lambda text: render(text, headline_table(read_headline(ROOT / "metrics/headline")),
+                                                     HEADLINE),
+             ROOT / RESULTS_PAGE: lambda text: render(text, results_table(pd.read_csv(ROOT / "metrics/summary.csv")))}
+    for path, rendered in pages.items():
+        text = path.read_text()
+        wanted = rendered(text)
+        if args.check and wanted != text:
+            print(f"{path.relative_to(ROOT)}: its table differs from metrics/ (summary.csv or headline/); run "
                   "`python tools/readme_results.py`", file=sys.stderr)
             return 1
-        return 0
-    readme_path.write_text(wanted)
+        if not args.check:
+            path.write_text(wanted)
     return 0
 
 
