@@ -233,6 +233,10 @@ def test_online_agents_compute_each_distinct_state_once_to_the_same_actions(keyd
     (lambda p: p["baselines"]["dqn"].update(learning_rate=0.1), "baselines.dqn: unknown keys ['learning_rate']"),
     (lambda p: p["baselines"]["dqn"].update(env_steps={"keydoor": 10}), "baselines.dqn.env_steps"),
     (lambda p: p["baselines"]["gru"].update(hidden="big"), "baselines.gru.hidden must be int"),
+    (lambda p: p["baselines"]["gru"].update(hidden=128.0), "baselines.gru.hidden must be int, got 128.0"),
+    (lambda p: p["baselines"]["gru"].update(embed=True), "baselines.gru.embed must be int, got True"),
+    (lambda p: p["baselines"]["dqn"].update(lr="1e-3"), "baselines.dqn.lr must be float, got '1e-3'"),
+    (lambda p: p["baselines"]["dqn"].update(fail_probs=[0.1, "x"]), "baselines.dqn.fail_probs"),
     (lambda p: p["baselines"]["options"].update(fail_probs=[2]), "baselines.options.fail_probs"),
     (lambda p: p["baselines"].update(online=["dqn", "ppo"]), "baselines.online.1: Input should be 'dqn' or 'options', got 'ppo'"),
     (lambda p: p["baselines"].update(online=["dqn"]), "['options'] are never trained"),
@@ -306,3 +310,29 @@ def test_an_lstms_batch_in_length_groups_is_the_one_padded_pass():
         assert torch.allclose(grouped, padded, rtol=0, atol=1e-6)
         for a, b in zip(torch.autograd.grad(grouped, params), torch.autograd.grad(padded, params)):
             assert torch.allclose(a, b, rtol=0, atol=1e-6)
+
+
+def test_every_baselines_knobs_are_checked_by_the_schema_of_its_config():
+    """The registry's config dataclasses are the one definition of a baseline's knobs: each gets a strict
+    pydantic schema (an int knob takes no float, string or bool; a float one an int; a tuple one a list; nothing
+    else), and a valid section gives the dataclass with those values."""
+    import dataclasses
+
+    from pydantic import ValidationError
+
+    from hnsdt.compose.params import config_schema
+    from hnsdt.core.methods import BASELINES
+    from hnsdt.implementations import code_of, resolve
+
+    for method in BASELINES:
+        for cls in (resolve(code_of(method).network).config_class, resolve(code_of(method).config)):
+            schema = config_schema(cls)
+            assert set(schema.model_fields) == {f.name for f in dataclasses.fields(cls)}
+            ints = [f.name for f in dataclasses.fields(cls) if f.type == "int"]
+            with pytest.raises(ValidationError):
+                schema.model_validate({ints[0]: 1.5})
+            with pytest.raises(ValidationError):
+                schema.model_validate({"not_a_knob": 1})
+    dqn = resolve(code_of("dqn").config)
+    checked = config_schema(dqn).model_validate({"gamma": 1, "fail_probs": [0.0, 0.2]})
+    assert checked.gamma == 1.0 and isinstance(checked.gamma, float) and checked.fail_probs == (0.0, 0.2)

@@ -20,14 +20,14 @@ import yaml
 from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.core.methods import BASELINES, DT_METHODS, METHODS, PROPOSED
 from hnsdt.implementations import code_of, resolve
-from hnsdt.compose.params import SECTIONS, Params, ParamsError, validate
+from hnsdt.compose.params import SECTIONS, Params, ParamsError, config_schema, validate
 from hnsdt.data.collect import POLICIES, Behaviour, CollectConfig
 from hnsdt.envs import ENV_IDS, LayoutError, load_layout
 from hnsdt.envs.layout import Layout
 
 __all__ = ["ParamsError", "Params", "load_params", "EnvSpec", "env_spec", "executor_config", "method_executor",
            "collect_config", "layout_collect_config", "model_config", "TrainSettings", "train_settings",
-           "BaselineSettings", "baseline_settings", "fill", "compute_settings", "EvaluateSettings", "evaluate_settings"]
+           "BaselineSettings", "baseline_settings", "typed_config", "compute_settings", "EvaluateSettings", "evaluate_settings"]
 
 
 def load_params(path: str | Path = "params.yaml", overrides=()) -> Params:
@@ -212,30 +212,29 @@ def train_settings(params: Params) -> TrainSettings:
         measure={m: (v.measure, v.starts) for m, v in train.validation.items()})
 
 
-def fill(params: Params, key: str, cls, section: dict, **fixed):
-    """A dataclass from the entries of ``section`` that name its fields, each checked against the type of
-    the field's default (tuples come from lists); ``key`` names the section in errors."""
-    values = {}
-    for f in dataclasses.fields(cls):
-        if f.name not in section or f.name in fixed:
-            continue
-        v, default = section[f.name], f.default
-        if isinstance(default, tuple):
-            if not isinstance(v, list):
-                raise params.error(f"{key}.{f.name} must be a list, got {v!r}")
-            v = tuple(v)
-        elif isinstance(default, bool) or isinstance(v, bool):
-            if not isinstance(v, bool) or not isinstance(default, bool):
-                raise params.error(f"{key}.{f.name} must be {type(default).__name__}, got {v!r}")
-        elif isinstance(default, float) and isinstance(v, (int, float)):
-            v = float(v)
-        elif not isinstance(v, type(default)):
-            raise params.error(f"{key}.{f.name} must be {type(default).__name__}, got {v!r}")
-        values[f.name] = v
+def typed_config(params: Params, key: str, cls, section: dict, **fixed):
+    """A config dataclass (``cls``) from the knobs of ``section`` that name its fields, validated by its pydantic
+    schema (:func:`~hnsdt.compose.params.config_schema`), and the ``fixed`` fields the pipeline sets itself;
+    ``key`` names the section in errors (one line: the knob, the type it must have, the value it got)."""
+    from pydantic import ValidationError
+
+    names = {f.name for f in dataclasses.fields(cls)}
+    given = {k: v for k, v in section.items() if k in names and k not in fixed}
     try:
-        return cls(**values, **fixed)
-    except (TypeError, ValueError) as e:
+        checked = config_schema(cls).model_validate(given)
+        return cls(**{k: getattr(checked, k) for k in given}, **fixed)
+    except ValidationError as e:
+        err = e.errors()[0]
+        where = ".".join(str(part) for part in (key, *err["loc"]))
+        kind = err["type"].removesuffix("_type").removesuffix("_parsing")
+        if err["type"].endswith("_type") and kind in _TYPE_NAMES:
+            raise params.error(f"{where} must be {_TYPE_NAMES[kind]}, got {err['input']!r}") from None
+        raise params.error(f"{where}: {err['msg']}, got {err['input']!r}") from None
+    except (TypeError, ValueError) as e:  # the dataclass's own checks (__post_init__)
         raise params.error(f"{key}: {e}") from None
+
+
+_TYPE_NAMES = {"int": "int", "float": "float", "bool": "bool", "string": "str", "tuple": "a list", "list": "a list"}
 
 
 @dataclass(frozen=True)
@@ -297,8 +296,8 @@ def baseline_settings(params: Params, method: str, env: str | EnvSpec, seed: int
     unknown = sorted(set(section) - known)
     if unknown:
         raise params.error(f"{key}: unknown keys {unknown}; expected some of {sorted(known)}")
-    return BaselineSettings(method, env, fill(params, key, net_cls, section, **net_fixed),
-                            fill(params, key, train_cls, section, **train_fixed), **extra)
+    return BaselineSettings(method, env, typed_config(params, key, net_cls, section, **net_fixed),
+                            typed_config(params, key, train_cls, section, **train_fixed), **extra)
 
 
 def _fail_probs(params: Params, key: str, values) -> list[float]:

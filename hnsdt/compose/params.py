@@ -12,7 +12,8 @@ from __future__ import annotations
 import re
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, field_validator, model_validator
+from pydantic import (BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, create_model, field_validator,
+                      model_validator)
 
 from hnsdt.data.collect import POLICIES, STARTS
 from hnsdt.models.windows import FORMULATIONS, LOSS_STEPS
@@ -28,6 +29,31 @@ PositiveInt = Annotated[int, Field(ge=1)]
 
 class ParamsError(ValueError):
     """A malformed params file; the message names the file and the key."""
+
+
+def config_schema(cls) -> type[BaseModel]:
+    """The pydantic schema of a method's config dataclass (the registry's network and training configs, e.g.
+    :class:`hnsdt.baselines.dqn.DQNConfig`): its fields with their types and defaults, strict (an ``int`` knob
+    takes no ``"3"``, ``3.0`` or ``True``; a ``float`` one takes an ``int``), no other keys; a tuple field takes
+    the YAML list. The dataclass stays the one place a knob is defined (with its default); this is how a params
+    section is checked against it (:func:`hnsdt.compose.config.typed_config`)."""
+    import dataclasses
+    import typing
+
+    if cls not in _CONFIG_SCHEMAS:
+        hints = typing.get_type_hints(cls)
+        fields = {}
+        for f in dataclasses.fields(cls):
+            kind = hints[f.name]
+            if typing.get_origin(kind) is tuple:  # a YAML list: lax for the container, strict for its items
+                kind = Annotated[kind, Field(strict=False)]
+            fields[f.name] = (kind, None)  # (a knob left out keeps the dataclass's default: only those given are checked)
+        _CONFIG_SCHEMAS[cls] = create_model(cls.__name__ + "Params", __config__=ConfigDict(
+            strict=True, extra="forbid", frozen=True), **fields)
+    return _CONFIG_SCHEMAS[cls]
+
+
+_CONFIG_SCHEMAS: dict[type, type[BaseModel]] = {}
 
 
 class Section(BaseModel):

@@ -15,8 +15,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from hnsdt.compose.config import (EnvSpec, Params, baseline_settings, env_spec, fill, layout_executor, method_executor,
-                               model_config, train_settings)
+from hnsdt.compose.config import (EnvSpec, Params, baseline_settings, env_spec, layout_executor, method_executor,
+                                  model_config, train_settings, typed_config)
 from hnsdt.envs.layout import Layout
 from hnsdt.core.methods import METHODS
 from hnsdt.implementations import code_of, network_for, resolve
@@ -278,7 +278,7 @@ def _budget(params: Params, method: str, train_cfg):
     if unknown:
         raise params.error(f"{key}: unknown key {unknown[0]}; expected one of {sorted(allowed)}")
     fixed = {k: v for k, v in vars(train_cfg).items() if k not in budget}
-    return fill(params, key, type(train_cfg), budget, **fixed)  # (types checked as for baselines.<method>)
+    return typed_config(params, key, type(train_cfg), budget, **fixed)  # (checked as baselines.<method>)
 
 
 def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: list[Layout],
