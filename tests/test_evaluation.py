@@ -81,8 +81,8 @@ def test_the_report_revision_is_dirty_for_code_changes_not_for_the_lock_file(tmp
 
 
 def test_the_headline_metrics_are_few_and_are_means_over_the_failure_probabilities():
-    """`dvc metrics show` reads metrics/headline.json: every method's success on each paper env and unseen
-    split, HNSDT's steps / optimum, each the mean over fail_probs of the seed means; at most ~40 numbers with
+    """`dvc metrics show` reads metrics/headline/ (a file per split): every method's success on each paper env
+    and unseen split, HNSDT's steps / optimum, each the mean over fail_probs of the seed means; at most ~40 numbers with
     the default methods (the planners that learn nothing are left to the report)."""
     import json
 
