@@ -5,7 +5,7 @@ import pandas as pd
 import pytest
 
 from conftest import REPO
-from hnsdt.evaluation.tables import metrics_json, per_seed_metrics, summary
+from hnsdt.evaluation.tables import LAYOUT_CELL, metrics_json, per_seed_metrics, summary
 
 
 def _table():
@@ -44,6 +44,26 @@ def test_no_success_gives_missing_steps_not_zero():
     row = summary(t).iloc[0]
     assert row.success_mean == 0 and math.isnan(row.steps_mean)
     assert metrics_json(summary(t))["e"]["m"]["fail_0.1"]["steps_mean"] is None
+
+
+def test_one_summary_serves_both_experiments():
+    """The unseen layouts' episodes (a split of several maps, each episode with its exact optimum) go through the
+    same summary as the paper's: the same success, steps and reward columns, plus steps / optimum over the
+    successful episodes, the optimum's success and the number of maps; a std is 0 where fewer than two seeds
+    have the metric, as on the paper's maps."""
+    t = _table().rename(columns={"env": "split"})
+    t["layout"] = ["a", "b", "a", "a", "b"]
+    t["optimal_steps"] = [10.0, 10.0, 10.0, 6.0, 12.5]
+    t["optimal_success"] = [1.0, 1.0, 0.5, 1.0, 1.0]
+    paper = summary(_table()).iloc[0]
+    row = summary(t, LAYOUT_CELL, sort=False).iloc[0]
+    for column in ("success_mean", "success_std", "steps_mean", "reward_mean", "seeds"):
+        assert row[column] == pytest.approx(paper[column])
+    assert row.steps_ratio_mean == pytest.approx((1.5 + 2.0) / 2)  # seed 0: 10/10, 20/10; seed 1: 12/6
+    assert row.optimal_success == pytest.approx((2.5 / 3 + 1.0) / 2) and row.layouts == 2
+    assert "steps_ratio_mean" not in summary(_table())
+    one_seed = summary(t[t.seed == 1], LAYOUT_CELL).iloc[0]
+    assert one_seed.success_std == 0 and one_seed.steps_ratio_std == 0 and one_seed.seeds == 1
 
 
 def test_seed_view_counts_solving_seeds_and_bootstraps_over_seeds():

@@ -16,7 +16,7 @@ from hnsdt.agents.rollout import Episode
 from hnsdt.envs.layout import Layout, equal_runs
 from hnsdt.evaluation.runs import Batch, EvalTask, Evaluation, episode_id, load_model, rerun
 from hnsdt.evaluation.segments import layout_navigator, segment_facts
-from hnsdt.evaluation.tables import layout_summary
+from hnsdt.evaluation.tables import LAYOUT_CELL, summary
 
 
 @lru_cache(maxsize=None)
@@ -76,7 +76,7 @@ def layout_evaluation(seeds: dict[str, list[int]], sources: tuple, fail_probs: t
     """The unseen layouts' :class:`~hnsdt.evaluation.runs.Evaluation`: every method (the keys of ``seeds``, in
     order) × its seeds on every source, ``episodes`` per layout and fail_prob (a seed's episodes are drawn from the
     seed, whichever method runs them), the checkpoints of view models at ``models_root/<method>/seed<K>``; it
-    writes ``episodes.csv``, ``summary.csv`` (:func:`hnsdt.evaluation.tables.layout_summary`), ``segments.csv``
+    writes ``episodes.csv``, ``summary.csv`` (:func:`hnsdt.evaluation.tables.summary`), ``segments.csv``
     and ``layouts.csv``, with the exact optimum per layout and fail_prob. ``splits``: only these splits' sources,
     with the episodes they have in the whole evaluation."""
     tasks = [EvalTask(method, seed, executors[method], *load_model(Path(models_root) / method / f"seed{seed}", method,
@@ -97,7 +97,7 @@ def _write_tables(tmp: Path, results: list, sources: tuple, fail_probs: tuple[fl
     table["optimal_steps"], table["optimal_success"] = zip(*(optimal[key] for key in zip(
         table.split, table.layout, table.fail_prob)))
     table.to_csv(tmp / "episodes.csv", index=False, float_format="%.6g")
-    layout_summary(table).to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
+    summary(table, LAYOUT_CELL, sort=False).to_csv(tmp / "summary.csv", index=False, float_format="%.6g")
     segments.to_csv(tmp / "segments.csv", index=False, float_format="%.6g")
     layouts = pd.DataFrame([{"split": s.split, "layout": s.name, "rows": s.layout.shape[0],
                              "cols": s.layout.shape[1], "max_steps": s.max_steps} for s in sources])

@@ -7,22 +7,42 @@ import numpy as np
 import pandas as pd
 
 
-def per_seed_metrics(table: pd.DataFrame) -> pd.DataFrame:
-    """success rate, mean steps on success (NaN when none succeeded), mean reward: one row per cell."""
-    g = table.groupby(["method", "env", "fail_prob", "seed"])
+PAPER_CELL = ("method", "env", "fail_prob")  # a cell of the paper protocol: one map
+LAYOUT_CELL = ("method", "split", "fail_prob")  # a cell of the unseen-layout experiment: a split of several maps
+
+
+def per_seed_metrics(table: pd.DataFrame, cell: tuple[str, ...] = PAPER_CELL) -> pd.DataFrame:
+    """One row per cell × seed: success rate, mean reward, mean steps on success (NaN when none succeeded) and,
+    where the episodes carry their exact optimum (``optimal_steps``, ``optimal_success``: the unseen layouts'),
+    steps / optimal steps on success and the optimum's success rate."""
+    keys = [*cell, "seed"]
+    g = table.groupby(keys, sort=False)  # (seeds in the order evaluated: the mean over them rounds as it always has)
     out = g.agg(success=("success", "mean"), reward=("reward", "mean"), episodes=("success", "size"))
-    out["steps"] = table[table.success].groupby(["method", "env", "fail_prob", "seed"])["steps"].mean()
+    won = table[table.success]
+    out["steps"] = won.groupby(keys, sort=False)["steps"].mean()
+    if "optimal_steps" in table:
+        ratio = table.assign(ratio=np.where(table.success, table.steps / table.optimal_steps, np.nan))
+        out["steps_ratio"] = ratio.groupby(keys, sort=False)["ratio"].mean()
+        out["optimal_success"] = g["optimal_success"].mean()
     return out.reset_index()
 
 
-def summary(table: pd.DataFrame) -> pd.DataFrame:
-    """Mean ± std over seeds of the per-seed metrics: one row per method × env × fail_prob."""
-    per_seed = per_seed_metrics(table)
-    g = per_seed.groupby(["method", "env", "fail_prob"])
-    out = g.agg(success_mean=("success", "mean"), success_std=("success", "std"),
-                steps_mean=("steps", "mean"), steps_std=("steps", "std"),
-                reward_mean=("reward", "mean"), reward_std=("reward", "std"), seeds=("seed", "nunique"))
-    return out.fillna({"success_std": 0.0, "steps_std": 0.0, "reward_std": 0.0}).reset_index()
+def summary(table: pd.DataFrame, cell: tuple[str, ...] = PAPER_CELL, sort: bool = True) -> pd.DataFrame:
+    """The summary of either experiment's episodes: per cell (:data:`PAPER_CELL`, :data:`LAYOUT_CELL`), the mean ±
+    std over seeds of :func:`per_seed_metrics` (a std is 0 where fewer than two seeds have the metric) and the
+    number of seeds; with the episodes' optimum, the optimum's success beside them; over a split of several
+    maps, how many. ``sort``: cells sorted (the paper protocol's tables), or in the order evaluated (the unseen
+    layouts', whose report sections follow it)."""
+    per_seed = per_seed_metrics(table, cell)
+    metrics = ["success", "steps", "reward"] + (["steps_ratio"] if "steps_ratio" in per_seed else [])
+    g = per_seed.groupby(list(cell), sort=sort)
+    out = g.agg(**{f"{m}_{stat}": (m, stat) for m in metrics for stat in ("mean", "std")}, seeds=("seed", "nunique"))
+    out = out.fillna({f"{m}_std": 0.0 for m in metrics}).reset_index()
+    if "optimal_success" in per_seed:
+        out["optimal_success"] = g["optimal_success"].mean().to_numpy()
+    if "split" in cell:
+        out["layouts"] = out["split"].map(table.groupby("split")["layout"].nunique())
+    return out
 
 
 def add_optimum(summ: pd.DataFrame, envs: dict) -> pd.DataFrame:
@@ -52,19 +72,4 @@ def metrics_json(summ: pd.DataFrame) -> dict:
             for k in ("success_mean", "success_std", "steps_mean", "steps_std", "reward_mean", "reward_std",
                       "success_ratio", "steps_ratio", "regret") if k in summ
         }
-    return out
-
-
-def layout_summary(table: pd.DataFrame) -> pd.DataFrame:
-    """Per method × split × fail_prob: success and steps / optimum (successful episodes), mean and std over
-    seeds; each seed's values are means over its layouts' episodes; the exact optimum's success beside them."""
-    t = table.assign(ratio=np.where(table["success"], table["steps"] / table["optimal_steps"], np.nan))
-    per_seed = t.groupby(["method", "split", "fail_prob", "seed"], sort=False).agg(
-        success=("success", "mean"), steps_ratio=("ratio", "mean"), optimal=("optimal_success", "mean")).reset_index()
-    out = per_seed.groupby(["method", "split", "fail_prob"], sort=False).agg(
-        success_mean=("success", "mean"), success_std=("success", "std"),
-        steps_ratio_mean=("steps_ratio", "mean"), steps_ratio_std=("steps_ratio", "std"),
-        optimal_success=("optimal", "mean"), seeds=("seed", "nunique")).reset_index()
-    layouts = table.groupby("split")["layout"].nunique()
-    out["layouts"] = out["split"].map(layouts)
     return out
