@@ -226,15 +226,15 @@ def typed_config(params: Params, key: str, cls, section: dict, **fixed):
     except ValidationError as e:
         err = e.errors()[0]
         where = ".".join(str(part) for part in (key, *err["loc"]))
-        kind = err["type"].removesuffix("_type").removesuffix("_parsing")
-        if err["type"].endswith("_type") and kind in _TYPE_NAMES:
+        kind = err["type"].removesuffix("_type")
+        if kind in _TYPE_NAMES:  # a value of the wrong type
             raise params.error(f"{where} must be {_TYPE_NAMES[kind]}, got {err['input']!r}") from None
         raise params.error(f"{where}: {err['msg']}, got {err['input']!r}") from None
     except (TypeError, ValueError) as e:  # the dataclass's own checks (__post_init__)
         raise params.error(f"{key}: {e}") from None
 
 
-_TYPE_NAMES = {"int": "int", "float": "float", "bool": "bool", "string": "str", "tuple": "a list", "list": "a list"}
+_TYPE_NAMES = {"int": "int", "float": "float", "bool": "bool", "string": "str", "tuple": "a list"}  # pydantic's names
 
 
 @dataclass(frozen=True)

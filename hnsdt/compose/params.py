@@ -33,10 +33,10 @@ class ParamsError(ValueError):
 
 def config_schema(cls) -> type[BaseModel]:
     """The pydantic schema of a method's config dataclass (the registry's network and training configs, e.g.
-    :class:`hnsdt.baselines.dqn.DQNConfig`): its fields with their types and defaults, strict (an ``int`` knob
-    takes no ``"3"``, ``3.0`` or ``True``; a ``float`` one takes an ``int``), no other keys; a tuple field takes
-    the YAML list. The dataclass stays the one place a knob is defined (with its default); this is how a params
-    section is checked against it (:func:`hnsdt.compose.config.typed_config`)."""
+    :class:`hnsdt.baselines.dqn.DQNConfig`): its fields with their types, strict (an ``int`` knob takes no
+    ``"3"``, ``3.0`` or ``True``; a ``float`` one takes an ``int``), no other keys; a tuple field takes the YAML
+    list. Every field is optional here: a knob left out keeps the dataclass's default, so the dataclass stays the
+    one place a knob and its default are defined (:func:`hnsdt.compose.config.typed_config` checks a section)."""
     import dataclasses
     import typing
 
@@ -47,7 +47,7 @@ def config_schema(cls) -> type[BaseModel]:
             kind = hints[f.name]
             if typing.get_origin(kind) is tuple:  # a YAML list: lax for the container, strict for its items
                 kind = Annotated[kind, Field(strict=False)]
-            fields[f.name] = (kind, None)  # (a knob left out keeps the dataclass's default: only those given are checked)
+            fields[f.name] = (kind, None)
         _CONFIG_SCHEMAS[cls] = create_model(cls.__name__ + "Params", __config__=ConfigDict(
             strict=True, extra="forbid", frozen=True), **fields)
     return _CONFIG_SCHEMAS[cls]

@@ -35,11 +35,11 @@ def summary(table: pd.DataFrame, cell: tuple[str, ...] = PAPER_CELL, sort: bool 
     layouts', whose report sections follow it)."""
     per_seed = per_seed_metrics(table, cell)
     metrics = ["success", "steps", "reward"] + (["steps_ratio"] if "steps_ratio" in per_seed else [])
-    g = per_seed.groupby(list(cell), sort=sort)
-    out = g.agg(**{f"{m}_{stat}": (m, stat) for m in metrics for stat in ("mean", "std")}, seeds=("seed", "nunique"))
-    out = out.fillna({f"{m}_std": 0.0 for m in metrics}).reset_index()
+    stats = {f"{m}_{stat}": (m, stat) for m in metrics for stat in ("mean", "std")} | {"seeds": ("seed", "nunique")}
     if "optimal_success" in per_seed:
-        out["optimal_success"] = g["optimal_success"].mean().to_numpy()
+        stats["optimal_success"] = ("optimal_success", "mean")
+    out = per_seed.groupby(list(cell), sort=sort).agg(**stats)
+    out = out.fillna({f"{m}_std": 0.0 for m in metrics}).reset_index()
     if "split" in cell:
         out["layouts"] = out["split"].map(table.groupby("split")["layout"].nunique())
     return out

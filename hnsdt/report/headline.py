@@ -10,7 +10,6 @@ from pathlib import Path
 import pandas as pd
 
 from hnsdt.core.fileio import atomic_dir
-
 from hnsdt.core.methods import METHODS, PROPOSED
 from hnsdt.report.common import methods_in
 

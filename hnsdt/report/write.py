@@ -29,7 +29,8 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
     """``generalisation``: the unseen-layout experiment's results folder (its section is left out without one);
     ``experiments``: the folder of the further ones (``unseen_experiments``: each in ``experiments``/NAME);
     ``headline``: the folder to write :func:`headline_metrics` into (one JSON file per split); ``ablations``: the
-    measured variants of that experiment (:mod:`hnsdt.evaluation.ablations`; its table and scaling figure are left out without one)."""
+    measured variants of that experiment (:mod:`hnsdt.evaluation.ablations`; its table and scaling figure are left
+    out without one)."""
     summary_path = results / "summary.csv"
     if not summary_path.is_file():
         raise FileNotFoundError(f"{summary_path}: no evaluation summary (run `dvc repro evaluate`)")
