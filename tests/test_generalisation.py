@@ -516,8 +516,10 @@ def test_the_dataset_over_generated_layouts_stores_each_frames_view(tmp_path):
     `observation.view` is the view of its own layout at its state, the card describes the feature, and the
     frames the learners read are view states."""
     from hnsdt.compose import generalisation as gen
+    from hnsdt.data.format import check_dataset
     from hnsdt.data.lerobot_io import open_dataset
     from hnsdt.data.frames import load_frames
+    from hnsdt.envs.observation import whole_map
     from hnsdt.models.view import view_states
 
     params = _tiny_generalisation_params(tmp_path)
@@ -526,12 +528,18 @@ def test_the_dataset_over_generated_layouts_stores_each_frames_view(tmp_path):
     cols = ds.hf_dataset.with_format("numpy")[:]
     layouts = [s.layout for s in gen.layout_splits(validate(params)) if s.split == "train"]
     assert sorted(set(np.ravel(cols["layout_index"]).tolist())) == list(range(len(layouts)))
-    for state, view, li in zip(cols["observation.state"], cols["observation.view"], np.ravel(cols["layout_index"])):
+    side = max(max(lay.shape) for lay in layouts)
+    for state, view, grid, li in zip(cols["observation.state"], cols["observation.view"], cols["observation.map"],
+                                     np.ravel(cols["layout_index"])):
         assert (view == local_view(layouts[li], state[None], 2).ravel()).all()
+        assert (grid == whole_map(layouts[li], state[None], side).ravel()).all()
     card = (root / "README.md").read_text()
     assert "`observation.view`" in card and f"on {len(layouts)} generated layouts" in card
+    assert "`observation.map`" in card and check_dataset(root)["map_side"] == side
     frames = load_frames(root)
     assert frames.states.shape[1] == 2 + 25 + layouts[0].n_flags
+    assert (load_frames(root, whole_map=True).states == np.concatenate(
+        [frames.states, np.stack(cols["observation.map"])], axis=1)).all()  # (what a planning module reads)
     first = np.stack(cols["observation.state"])[:1]
     assert (frames.states[0] == view_states(layouts[int(np.ravel(cols["layout_index"])[0])], first, 2)[0]).all()
 

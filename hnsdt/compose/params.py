@@ -213,6 +213,9 @@ class GeneralisationParams(Section):
     value_iterations: int = Field(0, ge=0, description="the decision transformers' view encoder: > 0 plans over "
                                   "the view towards the sub-goal's target with a value-iteration module of this "
                                   "many backups (0: none)")
+    whole_map: bool = Field(False, description="the decision transformers read the whole map too and plan over "
+                            "it towards the sub-goal's target with a learned planning module "
+                            "(hnsdt.models.plan.MapPlanner), once per sub-goal segment")
     operators: Literal[OPERATOR_SETS] | None = Field(None, description="the operators our arm's planner hands "
                                                       "its methods here (None: planner.operators); the "
                                                       "paper's arm keeps planner.paper's")

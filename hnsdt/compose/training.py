@@ -238,7 +238,7 @@ def layout_network_configs(params: Params, method: str, seed: int, layout: Layou
                                f"generalisation family {g.family})")
         try:
             cfg = view_config(entry.condition, layout.n_flags, g.view_radius, g.max_offset, g.conv_layers,
-                              g.value_iterations, max_timestep=g.max_steps, dropout=params.train.dropout,
+                              g.value_iterations, g.whole_map, max_timestep=g.max_steps, dropout=params.train.dropout,
                               formulation=ts.formulation[method],
                               **models[g.family].model_dump())
         except ValueError as e:
@@ -304,7 +304,8 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
             raise ValueError(f"dataset {dataset}: view radius {radius} (0 = no observation.view), but "
                              f"generalisation.view_radius is {g.view_radius}; collect it with "
                              "`python pipeline/generalisation.py collect`")
-        data = load_frames(dataset, layout_executor(params, method).operators)  # (Move: hindsight labels)
+        data = load_frames(dataset, layout_executor(params, method).operators,  # (Move: hindsight labels)
+                           whole_map=g.whole_map and lookup_method(method).stage == "train")
         facts = {"dataset": str(dataset), "family": g.family,
                  "target_return": float(data.returns_to_go[np.unique(data.episode_start)].max())}
     seeds = g.seeds_of(method)

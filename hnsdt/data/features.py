@@ -72,6 +72,10 @@ FEATURES = (
             "the map, 1 wall, 2 floor, 3 exit, 5+k key k (a = 0), 15+k closed door, 25+k open door, 35+k item k "
             "(`hnsdt.envs.observation`); the centre shows what lies under the agent, a key or item the agent holds "
             "is no longer drawn", lambda ep, t: ep["views"][t], when="view"),
+    Feature("observation.map", "int64", "the whole grid in this state, row-major, as the view's codes, at the top "
+            "left of a square of `map_side` (meta/hnsdt.json: the largest layout's larger dimension), the rest 0 "
+            "(outside the map); the agent's row and column are its cell in it, and it is not drawn",
+            lambda ep, t: ep["maps"][t], when="view"),
     Feature("layout_index", "int64", "which of the dataset's layouts the episode was played on (`layout_texts` in "
             "meta/hnsdt.json)", lambda ep, t: ep["layout_index"], ("layout",), when="view"),
 )
@@ -83,14 +87,17 @@ def _has(f: Feature, image: bool, view: bool) -> bool:
 
 
 def info_features(state_names: list[str], image_shape: tuple[int, int, int] | None = None,
-                  view_radius: int = 0) -> dict:
+                  view_radius: int = 0, map_side: int = 0) -> dict:
     """The features a dataset is created with (``LeRobotDataset.create``): ``image_shape`` (rows, cols, 3) when
-    frames are drawn, ``view_radius`` > 0 on datasets over many layouts. The image comes first (the order of
-    every dataset written so far)."""
+    frames are drawn, ``view_radius`` > 0 and ``map_side`` (the whole map's square) on datasets over many
+    layouts. The image comes first (the order of every dataset written so far)."""
     r = view_radius
+    if r > 0 and map_side < 1:
+        raise ValueError("a dataset over many layouts stores the whole map: map_side must be > 0")
     dataset_names = {"observation.state": tuple(state_names), "observation.image": ("height", "width", "channels"),
                      "observation.view": tuple(f"cell{dr:+d}{dc:+d}" for dr in range(-r, r + 1)
-                                               for dc in range(-r, r + 1))}
+                                               for dc in range(-r, r + 1)),
+                     "observation.map": tuple(f"r{i}c{j}" for i in range(map_side) for j in range(map_side))}
     chosen = [f for f in FEATURES if f.when != "task" and _has(f, image_shape is not None, r > 0)]
     out = {}
     for f in sorted(chosen, key=lambda f: f.when != "image"):  # stable: the image first, the rest in order
@@ -107,7 +114,8 @@ def card_rows(image: bool, view: bool) -> list[tuple[str, str]]:
 
 def frame(ep: dict, t: int, features: dict) -> dict:
     """Step ``t`` of episode ``ep`` as a LeRobot frame of ``features`` (:func:`info_features`), plus its task.
-    An episode of a drawn dataset carries ``images``, one over many layouts ``views`` and ``layout_index``."""
+    An episode of a drawn dataset carries ``images``, one over many layouts ``views``, ``maps`` and
+    ``layout_index``."""
     out = {}
     for f in FEATURES:
         if f.name == "task":

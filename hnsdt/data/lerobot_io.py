@@ -39,16 +39,17 @@ from hnsdt.data.features import frame, info_features  # noqa: E402
 from hnsdt.data.format import (EPISODES_TABLE, FORMAT_VERSION, HNSDT_META, DatasetError,  # noqa: E402,F401
                                check_dataset, episode_table)
 from hnsdt.envs.layout import Layout  # noqa: E402
-from hnsdt.envs.observation import local_view  # noqa: E402
+from hnsdt.envs.observation import local_view, whole_map  # noqa: E402
 from hnsdt.envs.render import render_rgb  # noqa: E402
 from hnsdt.core.fileio import atomic_dir  # noqa: E402
 
-def dataset_features(layout: Layout, render_px: int = 0, view_radius: int = 0) -> dict:
+def dataset_features(layout: Layout, render_px: int = 0, view_radius: int = 0, map_side: int = 0) -> dict:
     """The per-frame features of a dataset on ``layout`` (:mod:`hnsdt.data.features`); ``render_px`` > 0 adds
     the grid drawn at that many pixels per cell, stored as video (what LeRobot's visualizers, the Hub's
-    included, show); ``view_radius`` > 0 (datasets over many layouts) adds the local view and the layout index."""
+    included, show); ``view_radius`` > 0 (datasets over many layouts) adds the local view, the whole map on a
+    square of ``map_side`` and the layout index."""
     image = (layout.shape[0] * render_px, layout.shape[1] * render_px, 3) if render_px else None
-    return info_features(layout.state_names, image, view_radius)
+    return info_features(layout.state_names, image, view_radius, map_side)
 
 
 @contextlib.contextmanager
@@ -87,7 +88,8 @@ def write_dataset(root: str | Path, repo_id: str, layout: Layout | list[Layout],
     ``move_`` twins and a ``meta`` row) as a LeRobot dataset at ``root``, its card made from ``card``
     (:func:`hnsdt.data.card.card_arguments`). Built in a temporary folder beside ``root`` and moved into
     place only when complete, so a failure leaves no half-written dataset. ``layout`` may be a list (episodes
-    then name theirs by ``layout_index``) with ``view_radius`` > 0: each frame also stores its local view."""
+    then name theirs by ``layout_index``) with ``view_radius`` > 0: each frame also stores its local view and the
+    whole map."""
     from hnsdt.symbolic.subgoals import ID_TO_NAME
 
     root = Path(root)
@@ -95,10 +97,13 @@ def write_dataset(root: str | Path, repo_id: str, layout: Layout | list[Layout],
     if len(layouts) > 1 and not view_radius:
         raise ValueError("a dataset over several layouts stores views: view_radius must be > 0")
     layout = layouts[0]  # the state's names (every layout of a dataset has the same flags)
-    features = dataset_features(layout, render_px, view_radius)
+    side = max(max(lay.shape) for lay in layouts) if view_radius else 0  # the whole map's square
+    features = dataset_features(layout, render_px, view_radius, side)
     draw = (lambda state: render_rgb(layout, state, render_px)) if render_px else None
-    view = (lambda ep: local_view(layouts[ep["layout_index"]], ep["states"], view_radius).reshape(
-        len(ep["states"]), -1)) if view_radius else None
+    view = (lambda ep: {
+        "views": local_view(layouts[ep["layout_index"]], ep["states"], view_radius).reshape(len(ep["states"]), -1),
+        "maps": whole_map(layouts[ep["layout_index"]], ep["states"], side).reshape(len(ep["states"]), -1),
+    }) if view_radius else None
     with atomic_dir(root) as staging, _quiet_video_encoder():
         ds = LeRobotDataset.create(repo_id, fps=fps, features=features, root=staging, use_videos=bool(render_px))
         try:
@@ -116,7 +121,8 @@ def write_dataset(root: str | Path, repo_id: str, layout: Layout | list[Layout],
         rows = [dict(ep["meta"], episode_index=i) for i, ep in enumerate(episodes)]
         pd.DataFrame(rows).to_parquet(staging / EPISODES_TABLE, index=False)
         md5 = data_md5(staging)
-        texts = {"layout_texts": [lay.text for lay in layouts], "view_radius": view_radius} if view_radius else {}
+        texts = ({"layout_texts": [lay.text for lay in layouts], "view_radius": view_radius, "map_side": side}
+                 if view_radius else {})
         full_meta = dict(meta, format_version=FORMAT_VERSION, subgoal_vocabulary=ID_TO_NAME,
                          layout_text=layout.text, state_names=layout.state_names, card=card, data_md5=md5, **texts)
         (staging / HNSDT_META).write_text(json.dumps(full_meta, indent=2, sort_keys=True) + "\n")
@@ -142,7 +148,7 @@ def _add_episode(ds: LeRobotDataset, ep: dict, features: dict, draw=None, view=N
     if draw is not None:
         extra["images"] = [draw(state) for state in ep["states"][:len(ep["actions"])]]
     if view is not None:
-        extra["views"] = view(ep)
+        extra.update(view(ep))
     ep = dict(ep, **extra)
     for t in range(len(ep["actions"])):
         ds.add_frame(frame(ep, t, features))

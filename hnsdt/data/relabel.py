@@ -32,6 +32,8 @@ def learner_frames(model, method: str, facts: dict, layouts: list, executor: Exe
     random states; spread over ``fail_probs``), as view frames whose actions are the controller's towards each
     step's sub-goal (the planner's operator the learner was executing; for a learner without a planner, the
     planner's first operator from that step's state). Seeded by ``seed``."""
+    if getattr(model.cfg, "whole_map", False):  # (its frames would need the dataset's map square)
+        raise ValueError("relabelling (DAgger) does not support a model that reads the whole map (whole_map)")
     arrays: dict[str, list] = {k: [] for k in ("states", "actions", "rewards", "ids", "targets", "episode", "t")}
     make_agent = resolve(code_of(method).agent)
     n_episodes = 0

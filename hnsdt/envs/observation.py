@@ -4,7 +4,8 @@ The paper's state ``(row, col, flags)`` never shows a wall, a key or a door, so 
 memorise one map. :func:`local_view` gives, for a batch of states, the ``(2r+1) x (2r+1)`` window of cell codes
 centred on the agent (``radius`` r; cells beyond the grid read ``OUTSIDE``). Codes name objects by identity
 (key ``a`` is the same code on every layout) and show the state: a held key or item reads as floor, an open
-door as ``DOOR_OPEN + i``. :func:`full_view` is the whole grid with the agent's cell marked.
+door as ``DOOR_OPEN + i``. :func:`full_view` is the whole grid with the agent's cell marked; :func:`whole_map`
+the whole grid as a planner module reads it (:class:`hnsdt.models.plan.MapPlanner`), on a square of any side.
 """
 
 from __future__ import annotations
@@ -77,16 +78,20 @@ def local_view(layout: Layout, states: np.ndarray, radius: int) -> np.ndarray:
     return padded[np.arange(n)[:, None, None], rows[:, :, None], cols[:, None, :]]
 
 
-def view_states(layout: Layout | tuple[Layout, ...], states: np.ndarray, radius: int) -> np.ndarray:
+def view_states(layout: Layout | tuple[Layout, ...], states: np.ndarray, radius: int, map_side: int = 0
+                ) -> np.ndarray:
     """``row, col, view codes (row-major), flags`` per state: what a learner on unseen layouts reads
-    (:mod:`hnsdt.models.view`), and what a dataset over many layouts stores beside ``observation.state``.
+    (:mod:`hnsdt.models.view`), and what a dataset over many layouts stores beside ``observation.state``; with
+    ``map_side`` > 0 the whole map's codes on a square of that side after them (:func:`whole_map`).
     ``layout``: a tuple gives each equal run of states its own (:func:`hnsdt.envs.layout.layout_runs`)."""
     if not isinstance(layout, Layout):
         states = np.asarray(states, dtype=np.int64)
-        return np.concatenate([view_states(lay, states[rows], radius) for lay, rows in layout_runs(layout, len(states))])
+        return np.concatenate([view_states(lay, states[rows], radius, map_side)
+                               for lay, rows in layout_runs(layout, len(states))])
     states = np.asarray(states, dtype=np.int64).reshape(-1, layout.state_size)
     views = local_view(layout, states, radius).reshape(len(states), -1)
-    return np.concatenate([states[:, :2], views, states[:, 2:]], axis=1)
+    grids = [whole_map(layout, states, map_side).reshape(len(states), -1)] if map_side else []
+    return np.concatenate([states[:, :2], views, states[:, 2:], *grids], axis=1)
 
 
 def full_view(layout: Layout, states: np.ndarray) -> np.ndarray:
@@ -95,3 +100,16 @@ def full_view(layout: Layout, states: np.ndarray) -> np.ndarray:
     grids = state_codes(layout, states)
     grids[np.arange(len(grids)), states[:, 0], states[:, 1]] = AGENT
     return grids
+
+
+def whole_map(layout: Layout, states: np.ndarray, side: int | None = None) -> np.ndarray:
+    """(N, side, side) codes of the whole grid in each state (:func:`state_codes`, no agent marked) at the top
+    left of a square of ``side`` (default: the layout's larger dimension), the rest ``OUTSIDE``: one shape for
+    every layout of a dataset, the agent's ``(row, col)`` its cell in it."""
+    grids = state_codes(layout, states)
+    side = max(layout.shape) if side is None else int(side)
+    if side < max(grids.shape[1:]):
+        raise ValueError(f"a map of side {side} cannot hold a {grids.shape[1]} x {grids.shape[2]} layout")
+    out = np.full((len(grids), side, side), OUTSIDE, dtype=np.int64)
+    out[:, :grids.shape[1], :grids.shape[2]] = grids
+    return out

@@ -115,7 +115,8 @@ def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_step
     which records what it measured)."""
     torch.manual_seed(seed)
     model = network(model_cfg).to(device)
-    opt = Adam(model.parameters(), lr=lr)
+    groups = model.param_groups(lr) if hasattr(model, "param_groups") else model.parameters()
+    opt = Adam(groups, lr=lr)  # (a network may train a part at its own rate: param_groups(lr))
     best = None
     if state is None:
         first, step, seen, recent, curve, rng = 0, 0, 0, [], [], np.random.default_rng(seed)

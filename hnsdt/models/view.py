@@ -27,23 +27,18 @@ from hnsdt.envs.layout import Layout
 from hnsdt.envs.observation import N_CODES, view_states
 from hnsdt.models.dt import DecisionTransformer, DTConfig
 from hnsdt.models.kernels import Linear
+from hnsdt.models.plan import MapPlanner, taps
 from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig, QNetwork, QNetworkConfig
 from hnsdt.models.recurrent import RecurrentConfig, RecurrentPolicy
 
 
-def split_states(states: torch.Tensor, radius: int) -> tuple[torch.Tensor, torch.Tensor]:
-    """``(codes (…, cells) int64, flags (…, n_flags) float)`` of view state vectors."""
+def split_states(states: torch.Tensor, radius: int, n_flags: int | None = None
+                 ) -> tuple[torch.Tensor, torch.Tensor]:
+    """``(codes (…, cells) int64, flags (…, n_flags) float)`` of view state vectors (``n_flags``: where the
+    whole map follows them; None: the flags run to the end)."""
     cells = (2 * radius + 1) ** 2
-    return states[..., 2:2 + cells], states[..., 2 + cells:].float()
-
-
-def _taps(value: torch.Tensor) -> torch.Tensor:
-    """(N, 1, S, S) → (N, 9, S, S): each cell's 3 × 3 neighbourhood (zero beyond the edge), row-major — a
-    one-channel 3 × 3 convolution as a product with these, faster to train on CPU than ``conv2d``'s backward at
-    this size."""
-    side = value.shape[-1]
-    padded = F.pad(value[:, 0], (1, 1, 1, 1))
-    return torch.stack([padded[:, i:i + side, j:j + side] for i in range(3) for j in range(3)], dim=1)
+    end = None if n_flags is None else 2 + cells + n_flags
+    return states[..., 2:2 + cells], states[..., 2 + cells:end].float()
 
 
 class ValueIteration(nn.Module):
@@ -66,7 +61,7 @@ class ValueIteration(nn.Module):
         """grid (N, C, S, S), mark (N, 1, S, S) → (N, channels + 4)."""
         q_reward = self.q_from_reward(self.reward(torch.cat([grid, mark], dim=1)))
         weight = self.q_from_value.weight.reshape(-1, 9)
-        backup = lambda value: q_reward + torch.einsum("ck,nkhw->nchw", weight, _taps(value))  # noqa: E731
+        backup = lambda value: q_reward + torch.einsum("ck,nkhw->nchw", weight, taps(value))  # noqa: E731
         value = q_reward.max(dim=1, keepdim=True).values
         for _ in range(self.iterations):
             value = backup(value).max(dim=1, keepdim=True).values
@@ -81,12 +76,15 @@ class ViewEncoder(nn.Module):
     features computed the same way wherever they sit, so a wall next to a corridor reads alike in any corner of
     the view — the result flattened and projected, plus a linear map of the flags: one ``width``-vector per
     state. With ``value_iterations`` > 0 the view is planned over instead (:class:`ValueIteration`, the
-    target marked): the agent's 3 × 3 neighbourhood and the plan's read-out are projected."""
+    target marked): the agent's 3 × 3 neighbourhood and the plan's read-out are projected. With ``whole_map``
+    the state vectors end with the whole map (:func:`hnsdt.envs.observation.view_states`' ``map_side``) and a
+    planning module over it (:class:`hnsdt.models.plan.MapPlanner`) adds its read-out, projected."""
 
     def __init__(self, radius: int, code_dim: int, n_flags: int, width: int, conv_layers: int = 0,
-                 conv_channels: int = 32, value_iterations: int = 0, value_channels: int = 8):
+                 conv_channels: int = 32, value_iterations: int = 0, value_channels: int = 8,
+                 whole_map: bool = False, plan_channels: int = 8):
         super().__init__()
-        self.radius = radius
+        self.radius, self.n_flags = radius, n_flags
         self.code_emb = nn.Embedding(N_CODES, code_dim)
         self.convs = None  # (no convolutions: the parameters, and so the bytes, of the flattened encoder)
         if conv_layers:
@@ -101,11 +99,35 @@ class ViewEncoder(nn.Module):
         else:
             self.view_proj = Linear((2 * radius + 1) ** 2 * channels, width)
         self.flag_proj = Linear(max(n_flags, 1), width, bias=False)
+        self.map_plan = None
+        if whole_map:
+            self.map_plan = MapPlanner(code_dim, n_flags, plan_channels)
+            self.plan_proj = Linear(self.map_plan.out_features, width, bias=False)
 
     def forward(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
-        """``targets`` (…, 3), read only with value iterations: the target's row and column offset from the
-        agent, and 1 where there is a target (0: none; ``None``: none anywhere)."""
-        codes, flags = split_states(states, self.radius)
+        """``targets`` (…, 2), read only by a planning module: each step's sub-goal target cell (-1: none;
+        ``None``: none anywhere)."""
+        out = self.embed_view(states, None if targets is None or self.plan is None else self.offsets(states, targets))
+        if self.map_plan is None:
+            return out
+        cells = 2 + (2 * self.radius + 1) ** 2
+        flat = states.reshape(-1, states.shape[-1])
+        plan = self.map_plan(self.code_emb, flat[:, cells + self.n_flags:], flat[:, cells:cells + self.n_flags],
+                             None if targets is None else targets.reshape(-1, 2), flat[:, :2])
+        self.plan_logits = self.map_plan.act(plan[:, -4:])  # (steps, actions): the module's own, from its
+        #                                                       neighbours' values (its loss, in training)
+        return out + self.plan_proj(plan).reshape(*out.shape)
+
+    @staticmethod
+    def offsets(states: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+        """(…, 3): the target's row and column offset from the agent, and 1 where there is a target (0: none)."""
+        present = (targets[..., :1] >= 0).long()
+        return torch.cat([(targets - states[..., :2]) * present, present], dim=-1)
+
+    def embed_view(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
+        """The view and flags; ``targets`` (…, 3), read only with value iterations over the view
+        (:meth:`offsets`)."""
+        codes, flags = split_states(states, self.radius, self.n_flags)
         if flags.shape[-1] == 0:
             flags = torch.zeros(*flags.shape[:-1], 1, device=flags.device)
         cells = self.code_emb(codes)  # (..., cells, code_dim)
@@ -144,7 +166,10 @@ class ViewModel:
     cfg: object
 
     def model_states(self, layout: Layout, obs: np.ndarray) -> np.ndarray:
-        return view_states(layout, obs, self.cfg.view_radius)
+        side = 0
+        if getattr(self.cfg, "whole_map", False):  # (several layouts: one square that holds each)
+            side = max(max(lay.shape) for lay in ((layout,) if isinstance(layout, Layout) else layout))
+        return view_states(layout, obs, self.cfg.view_radius, side)
 
 
 # -- symmetries: the same episodes on the map turned and mirrored ----------------------------------------
@@ -153,18 +178,24 @@ SYMMETRIES = (1, 4, 8)  # none; the four quarter turns; those and their mirror i
 FAR = 4096  # turned cells are (col, FAR - row): never negative (-1 means "no target"), offsets between them exact
 
 
-def turn_episodes(batch: dict[str, np.ndarray], radius: int, k: np.ndarray) -> dict[str, np.ndarray]:
+def turn_episodes(batch: dict[str, np.ndarray], radius: int, k: np.ndarray, n_flags: int | None = None
+                  ) -> dict[str, np.ndarray]:
     """Episodes of view states (:func:`hnsdt.models.windows.make_episodes`) as they would have run on their map
     turned ``k % 4`` quarter turns clockwise, then mirrored left to right when ``k >= 4`` (``k``: one per
     episode): the world's rules are the same in every direction, so each is an episode of that map. The views
     turn with the map, the moves turn with it (up becomes right), the agent's cell and the sub-goal targets turn
     about a far origin, so the offsets between them — all a view network reads of them — are the turned ones.
     Flags, picks, timesteps and the conditioning's ids and returns stay; so do the markers of "no action yet"
-    (``prev_actions`` of the recurrent controllers)."""
+    (``prev_actions`` of the recurrent controllers). States that end with the whole map (after ``n_flags``
+    flags) turn it too, and their cells turn within its square, so they stay its cells."""
     out = dict(batch)
     side = 2 * radius + 1
     states = batch["states"].copy()
     codes = states[..., 2:2 + side * side].reshape(*states.shape[:-1], side, side)
+    start = 2 + side * side + (n_flags or 0)
+    map_side = int(round((states.shape[-1] - start) ** 0.5)) if n_flags is not None else 0
+    grids = states[..., start:].reshape(*states.shape[:-1], map_side, map_side) if map_side else None
+    far = map_side - 1 if map_side else FAR
     cells = states[..., :2]
     actions = {key: batch[key].copy() for key in ("actions", "prev_actions") if key in batch}
     targets = batch["subgoal_targets"].copy() if "subgoal_targets" in batch else None
@@ -172,13 +203,18 @@ def turn_episodes(batch: dict[str, np.ndarray], radius: int, k: np.ndarray) -> d
         turns, mirror = int(ki) % 4, int(ki) >= 4
         view = np.rot90(codes[i], k=-turns, axes=(-2, -1))
         codes[i] = view[..., ::-1] if mirror else view
+        if grids is not None:
+            grid = np.rot90(grids[i], k=-turns, axes=(-2, -1))
+            grids[i] = grid[..., ::-1] if mirror else grid
         for a in actions.values():
             turned = (a[i] + turns) % 4
             a[i] = np.where(a[i] < 4, (4 - turned) % 4 if mirror else turned, a[i])  # moves; pick and markers stay
-        cells[i] = _turn_cells(cells[i], turns, mirror)
+        cells[i] = _turn_cells(cells[i], turns, mirror, far)
         if targets is not None:
-            targets[i] = np.where(targets[i] >= 0, _turn_cells(targets[i], turns, mirror), targets[i])
+            targets[i] = np.where(targets[i] >= 0, _turn_cells(targets[i], turns, mirror, far), targets[i])
     states[..., 2:2 + side * side] = codes.reshape(*states.shape[:-1], side * side)  # (cells: a view of states)
+    if grids is not None:
+        states[..., start:] = grids.reshape(*states.shape[:-1], map_side * map_side)
     out.update(states=states, **actions)
     if targets is not None:
         out["subgoal_targets"] = targets
@@ -200,18 +236,18 @@ def turned_maps(model_cfg, symmetries: int, seed: int):
 
     def augment(arrays: dict, rows: np.ndarray, epoch: int) -> dict:
         k = np.random.default_rng([seed, epoch, 4099, int(rows[0])]).integers(0, symmetries, len(rows))
-        return turn_episodes(arrays, radius, k)
+        return turn_episodes(arrays, radius, k, model_cfg.n_flags if getattr(model_cfg, "whole_map", False) else None)
     return augment
 
 
-def _turn_cells(cells: np.ndarray, turns: int, mirror: bool) -> np.ndarray:
-    """(…, 2) (row, col) after ``turns`` clockwise quarter turns, (r, c) -> (c, FAR - r), then the mirror
-    (r, c) -> (r, FAR - c)."""
+def _turn_cells(cells: np.ndarray, turns: int, mirror: bool, far: int = FAR) -> np.ndarray:
+    """(…, 2) (row, col) after ``turns`` clockwise quarter turns, (r, c) -> (c, far - r), then the mirror
+    (r, c) -> (r, far - c): cells of a square of side ``far`` + 1 stay in it."""
     r, c = cells[..., 0], cells[..., 1]
     for _ in range(turns):
-        r, c = c, FAR - r
+        r, c = c, far - r
     if mirror:
-        c = FAR - c
+        c = far - c
     return np.stack([r, c], axis=-1)
 
 
@@ -229,11 +265,19 @@ class ViewDTConfig(DTConfig):
     value_iterations: int = 0  # > 0: a value-iteration module plans over the view towards the sub-goal's target
     #                            (ValueIteration), that many backups; needs the episode formulation
     value_channels: int = 8  # its action values per cell
+    whole_map: bool = False  # the states end with the whole map and a planning module plans over it towards the
+    #                          sub-goal's target (hnsdt.models.plan.MapPlanner); needs the episode formulation
+    plan_channels: int = 8  # its action values per cell
+    plan_loss: float = 1.0  # weight of the module's own imitation loss beside the transformer's (0: end to end
+    #                         through the transformer only)
+    plan_lr: float = 1.0  # the module's learning rate as a multiple of the transformer's
 
     def __post_init__(self):
         super().__post_init__()
         if self.value_iterations and self.formulation != "episode":
             raise ValueError("value_iterations > 0 needs formulation 'episode' (each step's own target)")
+        if self.whole_map and self.formulation != "episode":
+            raise ValueError("whole_map needs formulation 'episode' (each step's own target and map)")
 
     @property
     def max_offset(self) -> int:
@@ -241,10 +285,10 @@ class ViewDTConfig(DTConfig):
 
 
 def view_config(condition: str, n_flags: int, view_radius: int, max_offset: int, conv_layers: int = 0,
-                value_iterations: int = 0, **sizes) -> ViewDTConfig:
+                value_iterations: int = 0, whole_map: bool = False, **sizes) -> ViewDTConfig:
     side = 2 * max_offset + 1
     return ViewDTConfig(condition=condition, n_flags=n_flags, grid_h=side, grid_w=side, view_radius=view_radius,
-                        conv_layers=conv_layers, value_iterations=value_iterations, **sizes)
+                        conv_layers=conv_layers, value_iterations=value_iterations, whole_map=whole_map, **sizes)
 
 
 class ViewDecisionTransformer(ViewModel, DecisionTransformer, arch="view_decision_transformer",
@@ -252,13 +296,31 @@ class ViewDecisionTransformer(ViewModel, DecisionTransformer, arch="view_decisio
     def build_state_encoder(self, width: int) -> None:  # the view, never the absolute cell
         cfg = self.cfg
         self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, width, cfg.conv_layers,
-                                cfg.conv_channels, cfg.value_iterations, cfg.value_channels)
+                                cfg.conv_channels, cfg.value_iterations, cfg.value_channels, cfg.whole_map,
+                                cfg.plan_channels)
 
     def embed_states(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
-        if targets is None or self.view.plan is None:
-            return self.view(states)
-        present = (targets[..., :1] >= 0).long()
-        return self.view(states, torch.cat([(targets - states[..., :2]) * present, present], dim=-1))
+        return self.view(states, targets)
+
+    def param_groups(self, lr: float) -> list[dict]:
+        """Adam's groups: the planning module (``whole_map``) at ``plan_lr`` × ``lr``, the rest at ``lr``."""
+        planner = list(self.view.map_plan.parameters()) if self.view.map_plan is not None else []
+        ids = {id(p) for p in planner}
+        rest = [p for p in self.parameters() if id(p) not in ids]
+        return [{"params": rest}] + ([{"params": planner, "lr": lr * self.cfg.plan_lr}] if planner else [])
+
+    def loss(self, batch: dict) -> torch.Tensor:
+        """The transformer's loss, plus (``whole_map``) ``plan_loss`` × the planning module's own cross-entropy
+        on the same steps, from the read-out the forward pass made (packed in its order)."""
+        loss = super().loss(batch)
+        if self.view.map_plan is None or not self.cfg.plan_loss:
+            return loss
+        actions, mask, steps = batch["actions"], batch["loss_mask"], batch.get("steps")
+        if steps is not None:
+            actions, mask = actions[steps], mask[steps]
+        nll = F.cross_entropy(self.view.plan_logits, actions.reshape(-1), reduction="none")
+        mask = mask.reshape(-1).float()
+        return loss + self.cfg.plan_loss * (nll * mask).sum() / mask.sum().clamp(min=1.0)
 
     def subgoal_targets(self, states: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
         """Absolute target -> offset from the agent's cell at that step (-1: none)."""

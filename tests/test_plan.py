@@ -1,0 +1,143 @@
+"""The learned planning module over the whole map (hnsdt.models.plan.MapPlanner) and the data it reads: each
+frame's whole map in the dataset, turned with its episode, planned once per sub-goal segment, on maps of any
+side."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from hnsdt.envs.layout import load_layout
+from hnsdt.envs.observation import OUTSIDE, state_codes, view_states, whole_map
+from hnsdt.models.plan import MapPlanner
+from hnsdt.models.view import ViewDecisionTransformer, turn_episodes, view_config
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _model(**sizes):
+    cfg = view_config("subgoal", 2, 2, 7, whole_map=True, formulation="episode", context=4, n_layers=1, n_heads=2,
+                      d_model=16, max_timestep=200, **sizes)
+    torch.manual_seed(0)
+    return ViewDecisionTransformer(cfg).eval()
+
+
+def _episode(layout, T: int, seed: int = 0):
+    """T random states of ``layout`` (free cells, flags 0 then 1 half way) and their view states with the map."""
+    rng = np.random.default_rng(seed)
+    free = np.argwhere(~layout.walls)
+    cells = free[rng.integers(0, len(free), T)]
+    flags = np.zeros((T, layout.n_flags), dtype=np.int64)
+    flags[T // 2:, 0] = 1
+    states = np.concatenate([cells, flags], axis=1)
+    return states, view_states(layout, states, 2, max(layout.shape))
+
+
+def test_the_whole_map_is_the_grid_in_each_state_on_a_square_of_any_side():
+    layout = load_layout((REPO / "layouts/drawn/tall_16x4.txt").read_text())
+    states, _ = _episode(layout, 6)
+    grids = whole_map(layout, states, 20)
+    assert grids.shape == (6, 20, 20)
+    assert (grids[:, :16, :4] == state_codes(layout, states)).all() and (grids[:, :, 4:] == OUTSIDE).all()
+    assert (grids[:, 16:] == OUTSIDE).all()
+    with pytest.raises(ValueError, match="cannot hold"):
+        whole_map(layout, states, 15)
+
+
+def test_the_plan_is_made_once_per_segment_and_steps_as_the_episode_pass(monkeypatch):
+    """A segment is a run of steps with the same map, flags and target: the episode pass plans once per segment
+    (3 here), and stepping through the key/value cache plans each segment once and gives the same logits."""
+    layout = load_layout((REPO / "layouts/drawn/rooms_10x10.txt").read_text())
+    model = _model()
+    T = 12
+    _, states = _episode(layout, T)
+    targets = np.array([[1, 1]] * 4 + [[2, 3]] * 2 + [[2, 3]] * 6)  # the flags change at step 6: 3 segments
+    planned = []
+    original = MapPlanner.plan
+    monkeypatch.setattr(MapPlanner, "plan", lambda self, cells, *a: planned.append(len(cells)) or original(
+        self, cells, *a))
+    s = torch.from_numpy(states)[None]
+    actions, steps = torch.randint(0, 5, (1, T), generator=torch.Generator().manual_seed(0)), torch.arange(T)[None]
+    ids, tg = torch.ones(1, T, dtype=torch.long), torch.from_numpy(targets)[None]
+    with torch.no_grad():
+        full = model(s, actions, steps, None, subgoal_ids=ids, subgoal_targets=tg)
+    assert planned == [3]
+    planned.clear()
+    model.eval()  # (empties the kept plans: the episode pass above kept its three)
+    cache, rows = model.start(1), torch.arange(1)
+    got = torch.stack([model.step(cache, rows, s[:, t], torch.full((1,), 5) if t == 0 else actions[:, t - 1],
+                                  steps[:, t], ids[:, t], tg[:, t]) for t in range(T)], dim=1)
+    assert planned == [1, 1, 1] and torch.allclose(got, full, atol=1e-5)
+
+
+def test_the_target_and_the_map_change_what_the_module_reads():
+    """The read-out follows the sub-goal's target and the map (fails when either is not read)."""
+    layout = load_layout((REPO / "layouts/drawn/rooms_10x10.txt").read_text())
+    model = _model()
+    _, states = _episode(layout, 1)
+    s = torch.from_numpy(states)
+    free = np.argwhere(~layout.walls)
+    a, b = torch.from_numpy(free[:1]), torch.from_numpy(free[-1:])
+    with torch.no_grad():
+        base = model.view(s, a)
+        assert not torch.allclose(base, model.view(s, b))
+        walled = s.clone()
+        walled[0, 2 + 25 + 2:] = torch.where(walled[0, 2 + 25 + 2:] == 2, 1, walled[0, 2 + 25 + 2:])  # floor→wall
+        assert not torch.allclose(base, model.view(walled, a))
+
+
+def test_a_map_larger_than_any_training_map_runs_and_plans_over_all_of_it():
+    """Nothing is tied to a map size: a 24 x 24 map (576 backups: its side squared, at least any path's length)
+    and a 3 x 16 corridor step through the same model."""
+    from hnsdt.agents.dt_agents import HNSDTAgent
+    from hnsdt.agents.executor import ExecutorConfig
+    from hnsdt.agents.rollout import rollout
+    from hnsdt.envs.vector import KeyDoorVectorEnv
+
+    rows = ["#" * 24] + ["#" + "." * 22 + "#"] * 22 + ["#" * 24]
+    rows[1] = "#@" + "." * 21 + "#"
+    rows[5] = "#" + "." * 10 + "a" + "." * 11 + "#"
+    rows[12] = "#" * 11 + "A" + "#" * 12
+    rows[22] = "#" + "." * 21 + "G#"
+    big = load_layout("\n".join(rows))
+    assert MapPlanner.iterations(24) == 576
+    model = _model()
+    for layout in (big, load_layout((REPO / "layouts/drawn/thin_3x16.txt").read_text())):
+        agent = HNSDTAgent(layout, model, ExecutorConfig(operators="goto"))
+        (ep,) = rollout(KeyDoorVectorEnv(1, layout, 0.0, 12), agent, seed=0)
+        assert 1 <= ep.length <= 12
+
+
+def test_a_turned_episode_turns_its_whole_map_with_it():
+    """On a square map the turned episode's states, the whole map and the agent's cell included, are the states
+    of the turned map (``generalisation.symmetries`` with ``whole_map``)."""
+    from hnsdt.agents import SymbolicAgent, rollout
+    from hnsdt.envs.vector import KeyDoorVectorEnv
+
+    layout = load_layout((REPO / "layouts/drawn/spiral_9x9.txt").read_text())
+    (ep,) = rollout(KeyDoorVectorEnv(1, layout, 0.0, 150), SymbolicAgent(layout), seed=0)
+    T = ep.length
+    batch = {"states": view_states(layout, ep.states[:T], 2, 9)[None], "actions": ep.actions[None],
+             "subgoal_targets": ep.subgoal_targets[None]}
+    for k in range(8):
+        out = turn_episodes(batch, 2, np.array([k]), layout.n_flags)
+        turned = load_layout(_turned_text(layout.text, k))
+        cells = out["states"][0][:, :2]
+        flags = out["states"][0][:, 2 + 25:2 + 25 + layout.n_flags]
+        assert np.array_equal(out["states"][0], view_states(turned, np.concatenate([cells, flags], 1), 2, 9))
+        has = ep.subgoal_targets[:, 0] >= 0
+        codes = whole_map(turned, np.concatenate([cells, flags], 1), 9)
+        target = out["subgoal_targets"][0][has]
+        assert np.array_equal(codes[has, target[:, 0], target[:, 1]],
+                              whole_map(layout, ep.states[:T], 9)[has, ep.subgoal_targets[has, 0],
+                                                                     ep.subgoal_targets[has, 1]])
+
+
+def _turned_text(text: str, k: int) -> str:
+    grid = np.array([list(row) for row in text.strip().splitlines()])
+    grid = np.rot90(grid, k=-(k % 4))
+    if k >= 4:
+        grid = grid[:, ::-1]
+    return "\n".join("".join(row) for row in grid)
+
