@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from collections import deque
 
 import numpy as np
 import torch
@@ -28,24 +27,9 @@ pin_process()
 
 from hnsdt.data.collect import Behaviour, CollectConfig, collect_episodes  # noqa: E402
 from hnsdt.envs.generate import generate  # noqa: E402
-from hnsdt.envs.layout import MOVES  # noqa: E402
+from hnsdt.envs.layout import MOVES, reachable_cells  # noqa: E402
 from hnsdt.envs.observation import N_CODES, whole_map  # noqa: E402
 from hnsdt.models.plan import MapPlanner  # noqa: E402
-
-
-def steps_to(layout, target) -> np.ndarray:
-    """Steps from each cell to ``target`` with every door open (-1: unreachable): the score's reference."""
-    dist = np.full(layout.shape, -1)
-    dist[target] = 0
-    queue = deque([target])
-    while queue:
-        r, c = queue.popleft()
-        for dr, dc in MOVES:
-            n = (r + dr, c + dc)
-            if 0 <= n[0] < layout.shape[0] and 0 <= n[1] < layout.shape[1] and dist[n] < 0 and not layout.walls[n]:
-                dist[n] = dist[r, c] + 1
-                queue.append(n)
-    return dist
 
 
 def training_steps(family: str, maps: int, side: int):
@@ -72,7 +56,10 @@ def scores(module, embed, family: str, heldout: int, iterations=None) -> tuple[f
     for seed in range(100_000, 100_000 + heldout):
         layout = generate(family, seed)
         side, goal = max(layout.shape), np.array(layout.goal)
-        dist = steps_to(layout, layout.goal)
+        reach = reachable_cells(layout, layout.goal, set(layout.doors))  # (moves are reversible: steps to it)
+        dist = np.full(layout.shape, -1)
+        for cell, d in reach.items():
+            dist[cell] = d
         cells = np.argwhere(dist > 0)
         held = np.concatenate([cells[:1], np.ones((1, layout.n_flags), dtype=np.int64)], axis=1)
         grid = torch.from_numpy(whole_map(layout, held, side).reshape(1, -1))

@@ -12,6 +12,7 @@ from hnsdt.envs.layout import load_layout
 from hnsdt.envs.observation import OUTSIDE, state_codes, view_states, whole_map
 from hnsdt.models.plan import MapPlanner
 from hnsdt.models.view import ViewDecisionTransformer, turn_episodes, view_config
+from test_generalisation import _turned_text
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -134,10 +135,17 @@ def test_a_turned_episode_turns_its_whole_map_with_it():
                                                                      ep.subgoal_targets[has, 1]])
 
 
-def _turned_text(text: str, k: int) -> str:
-    grid = np.array([list(row) for row in text.strip().splitlines()])
-    grid = np.rot90(grid, k=-(k % 4))
-    if k >= 4:
-        grid = grid[:, ::-1]
-    return "\n".join("".join(row) for row in grid)
 
+def test_the_modules_own_loss_trains_its_head_only_when_weighted():
+    """``plan_loss`` adds the module's own imitation loss (VIN's objective, read from its neighbours' values):
+    its action head gets a gradient with it, none without it (the transformer never reads that head)."""
+    layout = load_layout((REPO / "layouts/drawn/rooms_10x10.txt").read_text())
+    _, states = _episode(layout, 8)
+    batch = {"states": torch.from_numpy(states)[None], "actions": torch.arange(8)[None] % 5,
+             "timesteps": torch.arange(8)[None], "subgoal_ids": torch.ones(1, 8, dtype=torch.long),
+             "subgoal_targets": torch.tensor([[[1, 1]] * 8]), "loss_mask": torch.ones(1, 8, dtype=torch.bool)}
+    for weight in (1.0, 0.0):
+        model = _model(plan_loss=weight).train()
+        model.loss(batch).backward()
+        head = model.view.map_plan.act.weight.grad
+        assert (head is not None and head.abs().sum() > 0) == (weight > 0)

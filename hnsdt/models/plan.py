@@ -112,7 +112,7 @@ class MapPlanner(nn.Module):
         new[1:] = (key[1:] != key[:-1]).any(-1)
         segment = new.cumsum(0) - 1
         first = torch.nonzero(new).flatten()
-        if torch.is_grad_enabled():
+        if self.training or torch.is_grad_enabled():  # (plans are kept only where the weights cannot change)
             q_reward, value = self._plan_rows(embed, grid[first], flags[first], targets[first], side)
         else:
             q_reward, value = self._kept_plans(embed, key[first], grid[first], flags[first], targets[first], side)
@@ -130,7 +130,8 @@ class MapPlanner(nn.Module):
     def _kept_plans(self, embed, keys, grid, flags, targets, side):
         names = [k.cpu().numpy().tobytes() for k in keys]
         plans = {name: self._plans[name] for name in names if name in self._plans}
-        missing = [i for i, name in enumerate(names) if name not in plans and names.index(name) == i]
+        first_of = {name: i for i, name in reversed(list(enumerate(names)))}  # each name's first row
+        missing = [i for name, i in first_of.items() if name not in plans]
         if missing:
             rows = torch.tensor(missing, device=grid.device)
             q_reward, value = self._plan_rows(embed, grid[rows], flags[rows], targets[rows], side)

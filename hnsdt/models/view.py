@@ -114,8 +114,8 @@ class ViewEncoder(nn.Module):
         flat = states.reshape(-1, states.shape[-1])
         plan = self.map_plan(self.code_emb, flat[:, cells + self.n_flags:], flat[:, cells:cells + self.n_flags],
                              None if targets is None else targets.reshape(-1, 2), flat[:, :2])
-        self.plan_logits = self.map_plan.act(plan[:, -4:])  # (steps, actions): the module's own, from its
-        #                                                       neighbours' values (its loss, in training)
+        if torch.is_grad_enabled():  # the module's own action logits, from its neighbours' values: its loss
+            self.plan_logits = self.map_plan.act(plan[:, -4:])  # (steps, actions), read by the model's loss
         return out + self.plan_proj(plan).reshape(*out.shape)
 
     @staticmethod
