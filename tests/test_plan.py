@@ -8,13 +8,17 @@ import numpy as np
 import pytest
 import torch
 
+from hnsdt.compose.generalisation import VALIDATION_SEED
+from hnsdt.envs.generate import generate
 from hnsdt.envs.layout import load_layout
 from hnsdt.envs.observation import OUTSIDE, state_codes, view_states, whole_map
+from hnsdt.evaluation.planning import shortest_way_shares, train_alone
 from hnsdt.models.plan import MapPlanner
 from hnsdt.models.view import ViewDecisionTransformer, turn_episodes, view_config
 from test_generalisation import _turned_text
 
 REPO = Path(__file__).resolve().parents[1]
+STEPS = 1500  # the module's training steps in the learning test (measured: docs/unseen-layouts-studies.md)
 
 
 def _model(**sizes):
@@ -73,13 +77,17 @@ def test_the_plan_is_made_once_per_segment_and_steps_as_the_episode_pass(monkeyp
 
 
 def test_the_target_and_the_map_change_what_the_module_reads():
-    """The read-out follows the sub-goal's target and the map (fails when either is not read)."""
+    """The read-out follows the sub-goal's target and the map (fails when either is not read): a target beside
+    the agent and one far off, the agent's neighbours as floor and as walls."""
     layout = load_layout((REPO / "layouts/drawn/rooms_10x10.txt").read_text())
     model = _model()
     _, states = _episode(layout, 1)
     s = torch.from_numpy(states)
-    free = np.argwhere(~layout.walls)
-    a, b = torch.from_numpy(free[:1]), torch.from_numpy(free[-1:])
+    r, c = states[0, :2]
+    free = {tuple(cell) for cell in np.argwhere(~layout.walls)}
+    beside = next(n for n in ((r - 1, c), (r + 1, c), (r, c - 1), (r, c + 1)) if n in free)
+    far = max(free, key=lambda cell: abs(cell[0] - r) + abs(cell[1] - c))
+    a, b = torch.tensor([beside]), torch.tensor([far])
     with torch.no_grad():
         base = model.view(s, a)
         assert not torch.allclose(base, model.view(s, b))
@@ -149,3 +157,51 @@ def test_the_modules_own_loss_trains_its_head_only_when_weighted():
         model.loss(batch).backward()
         head = model.view.map_plan.act.weight.grad
         assert (head is not None and head.abs().sum() > 0) == (weight > 0)
+
+
+def _values(module, grid: np.ndarray, flags, target) -> np.ndarray:
+    """The module's value map of one whole map ``grid`` (S, S) of codes towards ``target`` (row, col)."""
+    side = grid.shape[0]
+    with torch.no_grad():
+        _, value = module._plan_rows(torch.from_numpy(grid.reshape(1, -1)), torch.tensor([flags]),
+                                     torch.tensor(np.array([target])), side)
+    return value[0, 0].numpy()
+
+
+def test_the_modules_values_turn_and_shift_with_the_map():
+    """The backup over the four moves has the world's symmetries: a map turned a quarter, or mirrored, gives the
+    values turned or mirrored; the map moved within a larger square of outside cells gives its cells the same
+    values (everything per cell, no absolute position). Untrained weights: it holds for any."""
+    layout = load_layout((REPO / "layouts/drawn/pocket_9x12.txt").read_text())
+    states, _ = _episode(layout, 1)
+    torch.manual_seed(3)
+    module = MapPlanner(16, layout.n_flags).eval()
+    grid = whole_map(layout, states, 12)[0]
+    target = np.array(layout.goal)
+    base = _values(module, grid, [0, 1], target)
+    turned = np.rot90(grid, k=-1).copy()  # clockwise: (r, c) -> (c, S-1-r)
+    np.testing.assert_allclose(_values(module, turned, [0, 1], [target[1], 11 - target[0]]), np.rot90(base, k=-1),
+                               rtol=1e-6, atol=1e-5)
+    mirrored = grid[:, ::-1].copy()
+    np.testing.assert_allclose(_values(module, mirrored, [0, 1], [target[0], 11 - target[1]]), base[:, ::-1],
+                               rtol=1e-6, atol=1e-5)
+    h, w = layout.shape
+    placed = []
+    for dr, dc in ((1, 1), (3, 2)):
+        sea = np.full((17, 17), OUTSIDE, dtype=grid.dtype)
+        sea[dr:dr + h, dc:dc + w] = grid[:h, :w]
+        placed.append(_values(module, sea, [0, 1], target + [dr, dc])[dr:dr + h, dc:dc + w])
+    np.testing.assert_allclose(placed[0], placed[1], rtol=1e-6, atol=1e-5)
+
+
+def test_trained_on_a_handful_of_maps_it_plans_round_walls_on_maps_it_never_saw():
+    """The module alone (hnsdt.evaluation.planning, as benchmarks/plan_module.py), trained on 8 generated mazes' demonstrations, picks a
+    shortest way to the exit from most cells of 3 validation mazes — also from the cells whose shortest way
+    starts by walking away from the exit, which the cells around the agent cannot tell — and the same weights
+    with the backups cut do not (breadth-first search scores here only; it never feeds the module)."""
+    module = train_alone("keydoor_maze", 8, STEPS)
+    layouts = [generate("keydoor_maze", seed) for seed in range(VALIDATION_SEED, VALIDATION_SEED + 3)]
+    (planned, planned_away), (cut, cut_away) = shortest_way_shares(module, layouts), shortest_way_shares(module,
+                                                                                                        layouts, 0)
+    assert planned >= 0.85 and planned_away >= 0.6, (planned, planned_away)
+    assert cut <= planned - 0.2 and cut_away <= planned_away - 0.1, (cut, cut_away)

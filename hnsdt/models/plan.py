@@ -1,27 +1,33 @@
-"""A learned planning module over the whole map: a value-iteration network (Tamar et al. 2016) the decision
-transformer's state encoder is composed with (:class:`hnsdt.models.view.ViewEncoder`, ``whole_map``).
+"""A learned planning module over the whole map, the decision transformer's state encoder is composed with
+(:class:`hnsdt.models.view.ViewEncoder`, ``whole_map``): given the map's cells, a mark on the sub-goal's target
+cell (none for a DT without sub-goals) and the flags, it learns what each cell is, backs values up over the map
+and is read out at the agent's cell into the state token.
 
-Given the map's cells (their learned embeddings), a mark on the sub-goal's target cell (none for a DT without
-sub-goals) and the flags, it learns a reward per cell from that cell alone, then runs Bellman backups —
-``channels`` action values per cell, each its reward plus a learned 3 × 3 kernel's sum of the neighbours'
-values (VIN's transition kernel), the value their maximum, the weights shared by every backup — and is read out
-at the agent's cell: its action values and its four neighbours' values, relative to the best action's and its
-own. Nothing in it is a distance or a direction: reward, backup and read-out are learned from the collected
-episodes' actions, through the transformer, end to end — and through its own action head
-(:attr:`MapPlanner.act`, VIN's objective), which reads only the neighbours' values. Both choices close a
-shortcut measured to stop it planning: trained through the transformer alone (which also reads the view and
-the target's offset), or with VIN's 3 × 3 reward and a head on the agent's own action values, it learned to
-predict the demonstrations' actions from the cells around the agent, and its values pointed a shortest way
-from barely more cells than chance (docs/unseen-layouts-studies.md).
+Two backups (``backup``):
 
-How far it plans: a side × side map gets side² backups — at least the length of any path on it (a path visits
-each cell at most once), so a value reaches every cell the target can be reached from, whatever the map's
-shape or the leg's detour; nothing depends on the maps trained on (the convolutions are the same on any side).
-Each kernel's weights are scaled to an absolute sum of at most 1, so a backup never expands the values: they
-stay bounded however many backups run (a value moves by at most the largest reward per backup), where VIN's
-free kernel can grow them geometrically, to overflow in the 576 backups of a 24 × 24 map. (A kernel that is a
-probability over the neighbourhood, tried first, learned the demonstrations' actions far more slowly: 0.45
-against 0.82 of them after 300 steps; so did a read-out scaled by the best neighbour's gain.)
+* ``moves`` (the default): value iteration over the grid's own four moves, the way Neural A* (Yonetani et al.
+  2021) searches over a learned cost map. From its own code, the mark and the flags each cell learns a step cost
+  and a log-probability of being the goal; a cell's value is the larger of its goal value and its best
+  neighbour's less its step cost. The transition is the environment's (a move reaches one of four neighbours);
+  what is learned is which cells are cheap to cross (floor, a door the flags open) and which is the goal in this
+  state. The read-out is the four neighbours' values less the agent's: no distance or direction is an input or a
+  target, and with the backups cut the read-out points a shortest way from about half the cells.
+* ``kernel``: VIN's (Tamar et al. 2016): ``channels`` action values per cell, each the cell's reward plus a
+  learned 3 × 3 kernel's sum of the neighbours' values, the value their maximum; read out as the agent's action
+  values and its neighbours' values. Measured not to learn to plan from our demonstrations (its actions a
+  shortest way at 0.63 of held-out maze cells, 0.60 with the backups cut: docs/unseen-layouts-studies.md).
+
+Both read out into the transformer and into the module's own action head on the neighbours' read-out
+(:attr:`MapPlanner.act`, VIN's objective); both learn only from the collected episodes' actions.
+
+How far it plans: a side × side map gets up to side² backups — at least the length of any path on it (a path
+visits each cell at most once), so a value can reach every cell the target can be reached from, whatever the
+map's shape; ``moves`` stops as soon as no value changes. The layers act per cell, so any map's side runs. What
+does depend on the training maps is learned: how far a goal's value carries before a cell that is not the goal
+outranks it (their log-probabilities' gap over the floor's step cost), measured at about the training legs'
+length — the hand-drawn maps' long detours lie beyond it. Scaling the goal values by side² removes that horizon
+but made learning depend on the initial weights (1 of 4 seeds learned to plan; docs/unseen-layouts-studies.md).
+``kernel``'s weights are scaled to an absolute sum of at most 1, so its values stay bounded over 576 backups.
 
 The plan is computed once per sub-goal segment (a run of steps with the same map, flags and target) and read
 out at every step of it; at inference (no gradient) plans are kept by segment, so a step costs one read-out.
@@ -34,7 +40,10 @@ import torch.nn as nn
 import torch.nn.functional as F
 
 from hnsdt.envs.dynamics import N_ACTIONS
+from hnsdt.envs.observation import N_CODES
 
+BACKUPS = ("kernel", "moves")
+LOWEST = 20.0  # (moves) a neighbour's read-out at most this far below the agent's cell: walls and the edge
 CACHE = 4096  # plans kept at inference; the cache empties when full and whenever the weights may change
 
 
@@ -50,14 +59,19 @@ def taps(value: torch.Tensor) -> torch.Tensor:
 class MapPlanner(nn.Module):
     """Reward map → side² backups → the read-out at the agent's cell (``out_features`` numbers)."""
 
-    def __init__(self, code_dim: int, n_flags: int, channels: int = 8, hidden: int = 32):
+    def __init__(self, code_dim: int, n_flags: int, channels: int = 8, hidden: int = 32, backup: str = "moves"):
         super().__init__()
-        self.n_flags = n_flags
+        if backup not in BACKUPS:
+            raise ValueError(f"backup {backup!r} is not one of {', '.join(BACKUPS)}")
+        self.n_flags, self.backup = n_flags, backup
+        self.code_emb = nn.Embedding(N_CODES, code_dim)  # its own: the view's embedding learns at another pace
+        outputs = 1 if backup == "kernel" else 2  # (moves: a step's cost and the goal's log-value per cell)
         self.reward = nn.Sequential(nn.Conv2d(code_dim + 1 + n_flags, hidden, 1), nn.ReLU(),
-                                    nn.Conv2d(hidden, 1, 1))  # each cell's own: no view of its neighbours
-        self.q_from_reward = nn.Conv2d(1, channels, 1, bias=False)
-        self.transition = nn.Parameter(0.1 * torch.randn(channels, 9))  # each action's kernel over the 3 x 3
-        self.out_features = channels + 4
+                                    nn.Conv2d(hidden, outputs, 1))  # each cell's own: no view of its neighbours
+        if backup == "kernel":
+            self.q_from_reward = nn.Conv2d(1, channels, 1, bias=False)
+            self.transition = nn.Parameter(0.1 * torch.randn(channels, 9))  # each action's kernel over the 3 x 3
+        self.out_features = channels + 4 if backup == "kernel" else 4
         self.act = nn.Linear(4, N_ACTIONS)  # the module's own action logits from its neighbours' values (its loss)
         self._plans: dict[bytes, tuple[torch.Tensor, torch.Tensor]] = {}
 
@@ -79,28 +93,50 @@ class MapPlanner(nn.Module):
         gives (N, channels, S, S) and the value after side² backups (N, 1, S, S)."""
         side = cells.shape[-1]
         spread = flags[:, :self.n_flags, None, None].expand(-1, -1, side, side)
-        q_reward = self.q_from_reward(self.reward(torch.cat([cells, mark, spread], dim=1)))
+        reward = self.reward(torch.cat([cells, mark, spread], dim=1))
+        if self.backup == "moves":
+            return self._plan_moves(reward, side)
+        q_reward = self.q_from_reward(reward)
         weight = self.kernel()
         value = q_reward.max(dim=1, keepdim=True).values
         for _ in range(self.iterations(side)):
             value = (q_reward + torch.einsum("ck,nkhw->nchw", weight, taps(value))).max(dim=1, keepdim=True).values
         return q_reward, value
 
+    def _plan_moves(self, reward: torch.Tensor, side: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Backups over the four moves: a cell's value is the larger of its goal value (its learned
+        log-probability of being the goal) and its best neighbour's less the cell's learned step cost (≥ 0);
+        stops once nothing changes (at most side² backups)."""
+        cost = F.softplus(reward[:, :1])
+        goal = F.logsigmoid(reward[:, 1:])
+        value = goal
+        for _ in range(self.iterations(side)):
+            padded = F.pad(value[:, 0], (1, 1, 1, 1), value=-1e9)
+            best = torch.stack([padded[:, :-2, 1:-1], padded[:, 2:, 1:-1], padded[:, 1:-1, :-2],
+                                padded[:, 1:-1, 2:]]).max(dim=0).values
+            new = torch.maximum(goal, best[:, None] - cost)
+            if torch.equal(new, value):
+                break
+            value = new
+        return goal, value
+
     def read(self, q_reward: torch.Tensor, value: torch.Tensor, segment: torch.Tensor, cells: torch.Tensor
              ) -> torch.Tensor:
         """The read-out (M, channels + 4) of M steps, each in plan ``segment[i]`` at ``cells[i]`` (row, col)."""
         r, c = cells[:, 0], cells[:, 1]
-        padded = F.pad(value[:, 0], (1, 1, 1, 1))
+        padded = F.pad(value[:, 0], (1, 1, 1, 1), value=-1e9 if self.backup == "moves" else 0.0)
         around = torch.stack([padded[segment, r + i, c + j] for i in range(3) for j in range(3)], dim=-1)  # (M, 9)
+        if self.backup == "moves":  # (beyond the edge: a wall's lowest value, not -1e9)
+            return (around[:, [1, 7, 3, 5]] - around[:, 4:5]).clamp(min=-LOWEST)
         q = q_reward[segment, :, r, c] + around @ self.kernel().T
         near = around[:, [1, 7, 3, 5]] - around[:, 4:5]  # up, down, left, right, relative to the agent's cell
         return torch.cat([q - q.max(dim=-1, keepdim=True).values, near], dim=-1)
 
-    def forward(self, embed, grid: torch.Tensor, flags: torch.Tensor, targets: torch.Tensor | None,
+    def forward(self, grid: torch.Tensor, flags: torch.Tensor, targets: torch.Tensor | None,
                 cells: torch.Tensor) -> torch.Tensor:
         """The read-out (M, out_features) of M steps: ``grid`` (M, S²) codes of each step's map, ``flags``
         (M, n_flags), ``targets`` (M, 2) the sub-goal's cell (-1: none; None: no sub-goals), ``cells`` (M, 2)
-        the agent's; ``embed`` maps codes to (…, code_dim). One plan per run of equal map, flags and target."""
+        the agent's. One plan per run of equal map, flags and target."""
         m = grid.shape[0]
         side = int(round(grid.shape[1] ** 0.5))
         if side * side != grid.shape[1]:
@@ -113,28 +149,28 @@ class MapPlanner(nn.Module):
         segment = new.cumsum(0) - 1
         first = torch.nonzero(new).flatten()
         if self.training or torch.is_grad_enabled():  # (plans are kept only where the weights cannot change)
-            q_reward, value = self._plan_rows(embed, grid[first], flags[first], targets[first], side)
+            q_reward, value = self._plan_rows(grid[first], flags[first], targets[first], side)
         else:
-            q_reward, value = self._kept_plans(embed, key[first], grid[first], flags[first], targets[first], side)
+            q_reward, value = self._kept_plans(key[first], grid[first], flags[first], targets[first], side)
         return self.read(q_reward, value, segment, cells)
 
-    def _plan_rows(self, embed, grid, flags, targets, side):
+    def _plan_rows(self, grid, flags, targets, side):
         n = grid.shape[0]
-        cells = embed(grid).reshape(n, side, side, -1).permute(0, 3, 1, 2)
+        cells = self.code_emb(grid).reshape(n, side, side, -1).permute(0, 3, 1, 2)
         mark = torch.zeros(n, side * side, device=grid.device)
         present = (targets[:, 0] >= 0) & (targets[:, 0] < side) & (targets[:, 1] >= 0) & (targets[:, 1] < side)
         rows = torch.nonzero(present).flatten()
         mark[rows, targets[rows, 0] * side + targets[rows, 1]] = 1.0
         return self.plan(cells, mark.reshape(n, 1, side, side), flags.float())
 
-    def _kept_plans(self, embed, keys, grid, flags, targets, side):
+    def _kept_plans(self, keys, grid, flags, targets, side):
         names = [k.cpu().numpy().tobytes() for k in keys]
         plans = {name: self._plans[name] for name in names if name in self._plans}
         first_of = {name: i for i, name in reversed(list(enumerate(names)))}  # each name's first row
         missing = [i for name, i in first_of.items() if name not in plans]
         if missing:
             rows = torch.tensor(missing, device=grid.device)
-            q_reward, value = self._plan_rows(embed, grid[rows], flags[rows], targets[rows], side)
+            q_reward, value = self._plan_rows(grid[rows], flags[rows], targets[rows], side)
             made = {names[i]: (q_reward[j], value[j]) for j, i in enumerate(missing)}
             plans.update(made)
             if len(self._plans) + len(made) > CACHE:

@@ -82,7 +82,7 @@ class ViewEncoder(nn.Module):
 
     def __init__(self, radius: int, code_dim: int, n_flags: int, width: int, conv_layers: int = 0,
                  conv_channels: int = 32, value_iterations: int = 0, value_channels: int = 8,
-                 whole_map: bool = False, plan_channels: int = 8):
+                 whole_map: bool = False, plan_channels: int = 8, plan_backup: str = "moves"):
         super().__init__()
         self.radius, self.n_flags = radius, n_flags
         self.code_emb = nn.Embedding(N_CODES, code_dim)
@@ -101,7 +101,7 @@ class ViewEncoder(nn.Module):
         self.flag_proj = Linear(max(n_flags, 1), width, bias=False)
         self.map_plan = None
         if whole_map:
-            self.map_plan = MapPlanner(code_dim, n_flags, plan_channels)
+            self.map_plan = MapPlanner(code_dim, n_flags, plan_channels, backup=plan_backup)
             self.plan_proj = Linear(self.map_plan.out_features, width, bias=False)
 
     def forward(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
@@ -112,7 +112,7 @@ class ViewEncoder(nn.Module):
             return out
         cells = 2 + (2 * self.radius + 1) ** 2
         flat = states.reshape(-1, states.shape[-1])
-        plan = self.map_plan(self.code_emb, flat[:, cells + self.n_flags:], flat[:, cells:cells + self.n_flags],
+        plan = self.map_plan(flat[:, cells + self.n_flags:], flat[:, cells:cells + self.n_flags],
                              None if targets is None else targets.reshape(-1, 2), flat[:, :2])
         if torch.is_grad_enabled():  # the module's own action logits, from its neighbours' values: its loss
             self.plan_logits = self.map_plan.act(plan[:, -4:])  # (steps, actions), read by the model's loss
@@ -267,10 +267,12 @@ class ViewDTConfig(DTConfig):
     value_channels: int = 8  # its action values per cell
     whole_map: bool = False  # the states end with the whole map and a planning module plans over it towards the
     #                          sub-goal's target (hnsdt.models.plan.MapPlanner); needs the episode formulation
-    plan_channels: int = 8  # its action values per cell
+    plan_backup: str = "moves"  # its backup: "moves" (the four moves, each cell's step cost and goal value
+    #                             learned) or "kernel" (VIN's learned 3 x 3 kernel; hnsdt.models.plan)
+    plan_channels: int = 8  # (kernel) its action values per cell
     plan_loss: float = 1.0  # weight of the module's own imitation loss beside the transformer's (0: end to end
     #                         through the transformer only)
-    plan_lr: float = 1.0  # the module's learning rate as a multiple of the transformer's
+    plan_lr: float = 10.0  # the module's learning rate as a multiple of the transformer's
 
     def __post_init__(self):
         super().__post_init__()
@@ -297,7 +299,7 @@ class ViewDecisionTransformer(ViewModel, DecisionTransformer, arch="view_decisio
         cfg = self.cfg
         self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, width, cfg.conv_layers,
                                 cfg.conv_channels, cfg.value_iterations, cfg.value_channels, cfg.whole_map,
-                                cfg.plan_channels)
+                                cfg.plan_channels, cfg.plan_backup)
 
     def embed_states(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
         return self.view(states, targets)
