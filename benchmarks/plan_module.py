@@ -5,7 +5,7 @@ and over the cells whose shortest way starts by walking away from the exit, besi
 backups cut. `--drawn` scores the hand-drawn maps too: test maps, a diagnosis only, never for a choice.
 
 Run: python benchmarks/plan_module.py [--family keydoor_maze] [--maps 8] [--steps 2000] [--lr 1e-2] [--batch 64]
-     [--backup moves|kernel] [--layouts 5] [--model CHECKPOINT_DIR] [--drawn] [--per-map]
+     [--backup moves|kernel] [--layouts 5] [--model CHECKPOINT_DIR] [--drawn] [--per-map] [--legs]
 Prints the training loss every 250 steps, then per split `all cells planned P (cut C); walk-away cells planned …`,
 and the time.
 """
@@ -23,7 +23,7 @@ pin_process()
 from hnsdt.compose.generalisation import VALIDATION_SEED  # noqa: E402
 from hnsdt.envs.generate import generate  # noqa: E402
 from hnsdt.envs.layout import load_layout  # noqa: E402
-from hnsdt.evaluation.planning import shortest_way_shares, train_alone  # noqa: E402
+from hnsdt.evaluation.planning import LEGS, shortest_way_shares, train_alone  # noqa: E402
 from hnsdt.models.checkpoint import load_checkpoint  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -41,6 +41,8 @@ def main() -> None:
     ap.add_argument("--model", type=Path, help="score this trained DT's module (a checkpoint folder) instead")
     ap.add_argument("--drawn", action="store_true", help="also score the hand-drawn maps (a diagnosis: test maps)")
     ap.add_argument("--per-map", action="store_true", help="also print each hand-drawn map's scores")
+    ap.add_argument("--legs", action="store_true",
+                    help="also score the key and door legs (maps with one key and one door), not only the exit")
     args = ap.parse_args()
     start = time.time()
     if args.model:
@@ -58,9 +60,17 @@ def main() -> None:
         planned, cut = shortest_way_shares(module, layouts), shortest_way_shares(module, layouts, 0)
         print(f"{name}: all cells planned {planned[0]:.3f} (cut {cut[0]:.3f}); walk-away cells planned "
               f"{planned[1]:.3f} (cut {cut[1]:.3f})")
+        legs = [leg for leg in LEGS if leg == "exit" or args.legs]
+        if args.legs:
+            one = [layout for layout in layouts if len(layout.keys) == len(layout.doors) == 1]
+            print("  " + "; ".join(f"{leg} {' / '.join(f'{x:.3f}' for x in shortest_way_shares(module, one, leg=leg))}"
+                                   for leg in legs) + f" ({len(one)} maps with one key and one door)")
         if args.per_map and name == "hand-drawn maps":
             for layout in layouts:
-                print(f"  {layout.name}: " + " / ".join(f"{x:.2f}" for x in shortest_way_shares(module, [layout])))
+                mine = [leg for leg in legs if leg == "exit" or len(layout.keys) == len(layout.doors) == 1]
+                print(f"  {Path(layout.name).stem}: " + "; ".join(
+                    f"{leg} " + " / ".join(f"{x:.2f}" for x in shortest_way_shares(module, [layout], leg=leg))
+                    for leg in mine))
     print(f"{time.time() - start:.0f} s")
 
 

@@ -63,26 +63,47 @@ def train_alone(family: str, maps: int, steps: int, batch: int = 64, lr: float =
     return module.eval()
 
 
-def shortest_way_shares(module: MapPlanner, layouts: list[Layout], iterations: int | None = None
-                        ) -> tuple[float, float]:
+LEGS = ("key", "door", "exit")  # a GoTo sub-goal's targets on a map with one key and one door, in order
+
+
+def leg_state(layout: Layout, leg: str) -> tuple[tuple[int, int], np.ndarray, set[str]]:
+    """The target cell of ``leg``, the flags while it is walked (the key held from the door on, the door open for
+    the exit) and the doors open then; the key and door legs need a map with one key and one door."""
+    flags = np.ones(layout.n_flags, dtype=np.int64)
+    if leg == "exit":
+        return layout.goal, flags, set(layout.doors)
+    if len(layout.keys) != 1 or len(layout.doors) != 1:
+        raise ValueError(f"{layout.name}: the {leg} leg needs one key and one door")
+    flags[:] = 0
+    if leg == "key":
+        return next(iter(layout.keys.values())), flags, set()
+    flags[:1] = 1
+    (door, cell), = layout.doors.items()
+    return cell, flags, {door}  # (the door its own search's origin: a closed door's cell would reach nothing)
+
+
+def shortest_way_shares(module: MapPlanner, layouts: list[Layout], iterations: int | None = None,
+                        leg: str = "exit") -> tuple[float, float]:
     """(share of all cells, share of walk-away cells) of ``layouts`` from which the module's action is a shortest
-    way to the exit, with the key held and the door open; ``iterations``: that many backups instead of side²
-    (0: cut, each cell's own values only)."""
+    way to ``leg``'s target (:func:`leg_state`: by default the exit, with the key held and the door open);
+    ``iterations``: that many backups instead of side² (0: cut, each cell's own values only)."""
     if iterations is not None:
         module.iterations = lambda side: iterations  # (the instance's: the class keeps side²)
     good, away = [], []
     try:
         for layout in layouts:
-            side, goal = max(layout.shape), np.array(layout.goal)
-            reach = reachable_cells(layout, layout.goal, set(layout.doors))  # (moves are reversible: steps to it)
+            target, flags, open_doors = leg_state(layout, leg)
+            side, goal = max(layout.shape), np.array(target)
+            reach = reachable_cells(layout, target, open_doors)  # (moves are reversible: steps to it)
+            closed = {cell for d, cell in layout.doors.items() if d not in open_doors}
             dist = np.full(layout.shape, -1)
             for cell, d in reach.items():
                 dist[cell] = d
-            cells = np.argwhere(dist > 0)
-            held = np.concatenate([cells[:1], np.ones((1, layout.n_flags), dtype=np.int64)], axis=1)
-            grid = torch.from_numpy(whole_map(layout, held, side).reshape(1, -1))
+            cells = np.array([cell for cell in np.argwhere(dist > 0) if tuple(cell) not in closed])
+            state = np.concatenate([cells[:1], flags[None]], axis=1)
+            grid = torch.from_numpy(whole_map(layout, state, side).reshape(1, -1))
             with torch.no_grad():
-                q, v = module._plan_rows(grid, torch.ones(1, layout.n_flags), torch.tensor([layout.goal]), side)
+                q, v = module._plan_rows(grid, torch.from_numpy(flags[None]).float(), torch.tensor([target]), side)
                 read = module.read(q, v, torch.zeros(len(cells), dtype=torch.long), torch.from_numpy(cells))
                 chosen = module.act(read[:, -4:]).argmax(-1).numpy()
             for (r, c), a in zip(cells, chosen):
