@@ -87,34 +87,29 @@ def shortest_way_shares(module: MapPlanner, layouts: list[Layout], iterations: i
     """(share of all cells, share of walk-away cells) of ``layouts`` from which the module's action is a shortest
     way to ``leg``'s target (:func:`leg_state`: by default the exit, with the key held and the door open);
     ``iterations``: that many backups instead of side² (0: cut, each cell's own values only)."""
-    if iterations is not None:
-        module.iterations = lambda side: iterations  # (the instance's: the class keeps side²)
     good, away = [], []
-    try:
-        for layout in layouts:
-            target, flags, open_doors = leg_state(layout, leg)
-            side, goal = max(layout.shape), np.array(target)
-            reach = reachable_cells(layout, target, open_doors)  # (moves are reversible: steps to it)
-            closed = {cell for d, cell in layout.doors.items() if d not in open_doors}
-            dist = np.full(layout.shape, -1)
-            for cell, d in reach.items():
-                dist[cell] = d
-            cells = np.array([cell for cell in np.argwhere(dist > 0) if tuple(cell) not in closed])
-            state = np.concatenate([cells[:1], flags[None]], axis=1)
-            grid = torch.from_numpy(whole_map(layout, state, side).reshape(1, -1))
-            with torch.no_grad():
-                q, v = module._plan_rows(grid, torch.from_numpy(flags[None]).float(), torch.tensor([target]), side)
-                read = module.read(q, v, torch.zeros(len(cells), dtype=torch.long), torch.from_numpy(cells))
-                chosen = module.act(read[:, -4:]).argmax(-1).numpy()
-            for (r, c), a in zip(cells, chosen):
-                steps = [(r + dr, c + dc) for dr, dc in MOVES]
-                best = [n for n in steps if 0 <= n[0] < layout.shape[0] and 0 <= n[1] < layout.shape[1]
-                        and dist[n] == dist[r, c] - 1]
-                ok = bool(a < 4 and steps[a] in best)
-                good.append(ok)
-                if all(np.abs(np.array(n) - goal).sum() > np.abs(np.array((r, c)) - goal).sum() for n in best):
-                    away.append(ok)
-    finally:
-        if iterations is not None:
-            del module.iterations
+    for layout in layouts:
+        target, flags, open_doors = leg_state(layout, leg)
+        side, goal = max(layout.shape), np.array(target)
+        reach = reachable_cells(layout, target, open_doors)  # (moves are reversible: steps to it)
+        closed = {cell for d, cell in layout.doors.items() if d not in open_doors}
+        dist = np.full(layout.shape, -1)
+        for cell, d in reach.items():
+            dist[cell] = d
+        cells = np.array([cell for cell in np.argwhere(dist > 0) if tuple(cell) not in closed])
+        state = np.concatenate([cells[:1], flags[None]], axis=1)
+        grid = torch.from_numpy(whole_map(layout, state, side).reshape(1, -1))
+        with torch.no_grad():
+            q, v = module._plan_rows(grid, torch.from_numpy(flags[None]).float(), torch.tensor([target]), side,
+                                     iterations)
+            read = module.read(q, v, torch.zeros(len(cells), dtype=torch.long), torch.from_numpy(cells))
+            chosen = module.act(read[:, -4:]).argmax(-1).numpy()
+        for (r, c), a in zip(cells, chosen):
+            steps = [(r + dr, c + dc) for dr, dc in MOVES]
+            best = [n for n in steps if 0 <= n[0] < layout.shape[0] and 0 <= n[1] < layout.shape[1]
+                    and dist[n] == dist[r, c] - 1]
+            ok = bool(a < 4 and steps[a] in best)
+            good.append(ok)
+            if all(np.abs(np.array(n) - goal).sum() > np.abs(np.array((r, c)) - goal).sum() for n in best):
+                away.append(ok)
     return float(np.mean(good)), float(np.mean(away)) if away else float("nan")

@@ -57,7 +57,8 @@ def taps(value: torch.Tensor) -> torch.Tensor:
 
 
 class MapPlanner(nn.Module):
-    """Reward map → side² backups → the read-out at the agent's cell (``out_features`` numbers)."""
+    """Each cell's own layers → backups (at most side²) → the read-out at the agent's cell (``out_features``
+    numbers)."""
 
     def __init__(self, code_dim: int, n_flags: int, channels: int = 8, hidden: int = 32, backup: str = "moves"):
         super().__init__()
@@ -87,30 +88,33 @@ class MapPlanner(nn.Module):
         self._plans.clear()  # (training changes the weights the kept plans were made with)
         return super().train(mode)
 
-    def plan(self, cells: torch.Tensor, mark: torch.Tensor, flags: torch.Tensor
+    def plan(self, cells: torch.Tensor, mark: torch.Tensor, flags: torch.Tensor, backups: int | None = None
              ) -> tuple[torch.Tensor, torch.Tensor]:
-        """cells (N, code_dim, S, S), mark (N, 1, S, S), flags (N, n_flags) → the action values the reward
-        gives (N, channels, S, S) and the value after side² backups (N, 1, S, S)."""
+        """cells (N, code_dim, S, S), mark (N, 1, S, S), flags (N, n_flags) → what the read-out needs besides
+        the values — ``moves``: each cell's goal value (N, 1, S, S); ``kernel``: the action values its reward
+        gives (N, channels, S, S) — and the values after the backups (N, 1, S, S). ``backups``: at most that
+        many instead of side² (0: each cell's own values, nothing planned)."""
         side = cells.shape[-1]
+        backups = self.iterations(side) if backups is None else backups
         spread = flags[:, :self.n_flags, None, None].expand(-1, -1, side, side)
         reward = self.reward(torch.cat([cells, mark, spread], dim=1))
         if self.backup == "moves":
-            return self._plan_moves(reward, side)
+            return self._plan_moves(reward, backups)
         q_reward = self.q_from_reward(reward)
         weight = self.kernel()
         value = q_reward.max(dim=1, keepdim=True).values
-        for _ in range(self.iterations(side)):
+        for _ in range(backups):
             value = (q_reward + torch.einsum("ck,nkhw->nchw", weight, taps(value))).max(dim=1, keepdim=True).values
         return q_reward, value
 
-    def _plan_moves(self, reward: torch.Tensor, side: int) -> tuple[torch.Tensor, torch.Tensor]:
+    def _plan_moves(self, reward: torch.Tensor, backups: int) -> tuple[torch.Tensor, torch.Tensor]:
         """Backups over the four moves: a cell's value is the larger of its goal value (its learned
         log-probability of being the goal) and its best neighbour's less the cell's learned step cost (≥ 0);
-        stops once nothing changes (at most side² backups)."""
+        stops once nothing changes (at most ``backups``)."""
         cost = F.softplus(reward[:, :1])
         goal = F.logsigmoid(reward[:, 1:])
         value = goal
-        for _ in range(self.iterations(side)):
+        for _ in range(backups):
             padded = F.pad(value[:, 0], (1, 1, 1, 1), value=-1e9)
             best = torch.stack([padded[:, :-2, 1:-1], padded[:, 2:, 1:-1], padded[:, 1:-1, :-2],
                                 padded[:, 1:-1, 2:]]).max(dim=0).values
@@ -122,7 +126,7 @@ class MapPlanner(nn.Module):
 
     def read(self, q_reward: torch.Tensor, value: torch.Tensor, segment: torch.Tensor, cells: torch.Tensor
              ) -> torch.Tensor:
-        """The read-out (M, channels + 4) of M steps, each in plan ``segment[i]`` at ``cells[i]`` (row, col)."""
+        """The read-out (M, out_features) of M steps, each in plan ``segment[i]`` at ``cells[i]`` (row, col)."""
         r, c = cells[:, 0], cells[:, 1]
         padded = F.pad(value[:, 0], (1, 1, 1, 1), value=-1e9 if self.backup == "moves" else 0.0)
         around = torch.stack([padded[segment, r + i, c + j] for i in range(3) for j in range(3)], dim=-1)  # (M, 9)
@@ -154,14 +158,14 @@ class MapPlanner(nn.Module):
             q_reward, value = self._kept_plans(key[first], grid[first], flags[first], targets[first], side)
         return self.read(q_reward, value, segment, cells)
 
-    def _plan_rows(self, grid, flags, targets, side):
+    def _plan_rows(self, grid, flags, targets, side, backups: int | None = None):
         n = grid.shape[0]
         cells = self.code_emb(grid).reshape(n, side, side, -1).permute(0, 3, 1, 2)
         mark = torch.zeros(n, side * side, device=grid.device)
         present = (targets[:, 0] >= 0) & (targets[:, 0] < side) & (targets[:, 1] >= 0) & (targets[:, 1] < side)
         rows = torch.nonzero(present).flatten()
         mark[rows, targets[rows, 0] * side + targets[rows, 1]] = 1.0
-        return self.plan(cells, mark.reshape(n, 1, side, side), flags.float())
+        return self.plan(cells, mark.reshape(n, 1, side, side), flags.float(), backups)
 
     def _kept_plans(self, keys, grid, flags, targets, side):
         names = [k.cpu().numpy().tobytes() for k in keys]
