@@ -143,7 +143,6 @@ def test_a_turned_episode_turns_its_whole_map_with_it():
                                                                      ep.subgoal_targets[has, 1]])
 
 
-
 def test_the_modules_own_loss_trains_its_head_only_when_weighted():
     """``plan_loss`` adds the module's own imitation loss (VIN's objective, read from its neighbours' values):
     its action head gets a gradient with it, none without it (the transformer never reads that head)."""
@@ -195,10 +194,11 @@ def test_the_modules_values_turn_and_shift_with_the_map():
 
 
 def test_trained_on_a_handful_of_maps_it_plans_round_walls_on_maps_it_never_saw():
-    """The module alone (hnsdt.evaluation.planning, as benchmarks/plan_module.py), trained on 8 generated mazes' demonstrations, picks a
-    shortest way to the exit from most cells of 3 validation mazes — also from the cells whose shortest way
-    starts by walking away from the exit, which the cells around the agent cannot tell — and the same weights
-    with the backups cut do not (breadth-first search scores here only; it never feeds the module)."""
+    """The module alone (hnsdt.evaluation.planning, as benchmarks/plan_module.py), trained on 8 generated mazes'
+    demonstrations, picks a shortest way to the exit from most cells of 3 validation mazes — also from the cells
+    whose shortest way starts by walking away from the exit, which the cells around the agent cannot tell — and
+    the same weights with the backups cut do not (breadth-first search scores here only; it never feeds the
+    module)."""
     module = train_alone("keydoor_maze", 8, STEPS)
     layouts = [generate("keydoor_maze", seed) for seed in range(VALIDATION_SEED, VALIDATION_SEED + 3)]
     (planned, planned_away), (cut, cut_away) = shortest_way_shares(module, layouts), shortest_way_shares(module,
