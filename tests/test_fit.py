@@ -59,6 +59,29 @@ def test_a_run_stopped_and_continued_elsewhere_is_the_run_in_one_go(frames, keyd
     for (name, a), b in zip(whole.state_dict().items(), part.state_dict().values()):
         assert torch.equal(a, b), name
     assert not part.training
+    for part_name, change in _STATE_PARTS.items():  # ... and it is the state's run: change a part, change the run
+        other, other_curve = train(frames, keydoor, state=change(pickle.loads(pickle.dumps(state))))
+        assert other_curve != whole_curve or not _same_weights(whole, other), f"{part_name} of the state unused"
+
+
+def _same_weights(a: torch.nn.Module, b: torch.nn.Module) -> bool:
+    return all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values()))
+
+
+def _nudged_moments(optimizer: dict) -> dict:
+    return {**optimizer, "state": {i: {k: v * 1.5 if k == "exp_avg" else v for k, v in moments.items()}
+                                   for i, moments in optimizer["state"].items()}}
+
+
+# What a continued run must read from its state; a run that ignored it and redid the run from its seed would
+# end in the same bytes as one run in one go, so each of these, changed, must change what it ends in.
+_STATE_PARTS = {
+    "weights": lambda s: replace(s, model={k: v + 0.01 if v.is_floating_point() else v for k, v in s.model.items()}),
+    "optimiser moments": lambda s: replace(s, optimizer=_nudged_moments(s.optimizer)),
+    "batch order's stream": lambda s: replace(s, rng=np.random.default_rng(999)),
+    "dropout's stream": lambda s: replace(s, torch_rng=torch.Generator().manual_seed(999).get_state()),
+    "epochs done": lambda s: replace(s, epoch=s.epoch + 1),
+}
 
 
 def _dqn(keydoor, **kw):
@@ -89,6 +112,17 @@ def test_an_online_run_paused_and_continued_elsewhere_is_the_run_in_one_go(keydo
     np.testing.assert_equal(part_curve, whole_curve)  # (NaN losses before learning starts)
     for (name, a), b in zip(whole.state_dict().items(), part.state_dict().values()):
         assert torch.equal(a, b), name
+    # ... and it is the paused run's: a run that ignored it and started again from its seed would end in the same
+    # bytes, so its weights or its stream, changed, must change what it ends in
+    changed = pickle.loads(pickle.dumps(paused))
+    with torch.no_grad():
+        for p in changed.net.parameters():
+            p.add_(0.01)
+    assert not _same_weights(whole, train(keydoor, state=changed)[0]), "the paused weights unused"
+    changed = pickle.loads(pickle.dumps(paused))
+    changed.rngs = [np.random.default_rng(999) for _ in changed.rngs]
+    other, other_curve, _ = train(keydoor, state=changed)
+    assert not _same_weights(whole, other), "the paused stream unused"
 
 
 def _countdown(task: tuple[str, int]):
@@ -199,6 +233,12 @@ def test_a_validated_run_stopped_and_continued_elsewhere_is_the_run_in_one_go(fr
     assert usage["best_epoch"] == min(usage["validation_loss"], key=lambda h: h["value"])["epoch"]
     for (name, a), b in zip(whole.state_dict().items(), part.state_dict().values()):
         assert torch.equal(a, b), name
+    # the best epoch so far travels too: one no later epoch can beat is the one the continued run keeps
+    kept = {k: v + 0.01 if v.is_floating_point() else v for k, v in state.best[2].items()}
+    unbeaten, _, unbeaten_usage = train_decision_transformer(
+        frames, cfg, tc, progress=False, state=replace(state, best=(float("-inf"), state.best[1], kept)))
+    assert unbeaten_usage["best_epoch"] == state.best[1]
+    assert all(torch.equal(kept[k], v) for k, v in unbeaten.state_dict().items())
 
 
 @pytest.mark.parametrize("validated", [True, False], ids=["plateau", "fixed_budget"])
