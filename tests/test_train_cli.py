@@ -1,5 +1,9 @@
 """Same seed, same bytes, however the runs are grouped and wherever they execute: one process or a pool of
-workers, alone or beside other seeds, the local executor or a real (local) Ray instance."""
+workers, alone or beside other seeds, the local executor, a real (local) Ray instance or a two-node Ray cluster
+started by hand."""
+
+import shutil
+from pathlib import Path
 
 import pytest
 
@@ -42,3 +46,82 @@ def test_executors_and_worker_counts_give_the_same_bytes(workdir, tmp_path):  # 
     for name in ("pool", "ray"):
         for sub in ("models", "curves", "results"):
             assert _files(tmp_path / name / sub) == reference[sub], f"{name} {sub} differ from one process"
+
+
+def _plain_environment() -> dict[str, str]:
+    """This process's environment less every variable the pipeline pins: what a shell that starts a Ray node
+    by hand has."""
+    from hnsdt.core.reproducible import ALWAYS, PINNED_CPU
+
+    from tiny_repo import ENV
+
+    return {k: v for k, v in ENV.items() if k not in ALWAYS and k not in PINNED_CPU}
+
+
+def _kill_processes_naming(text: str) -> None:
+    """SIGKILL every process whose command line names ``text`` (a cluster's own temp folder) and their
+    descendants (Ray's agents rename themselves): `ray stop` would stop every Ray instance of this user, the
+    other test worker's too."""
+    import os
+    import signal
+
+    parents, named = {}, set()
+    for pid in (int(p) for p in os.listdir("/proc") if p.isdigit()):
+        try:
+            stat = Path(f"/proc/{pid}/stat").read_text()
+            parents[pid] = int(stat[stat.rindex(")") + 2:].split()[1])
+            if text in Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace"):
+                named.add(pid)
+        except (OSError, ValueError):
+            continue
+    doomed, grown = set(named) - {os.getpid()}, True
+    while grown:
+        more = {pid for pid, parent in parents.items() if parent in doomed} - doomed - {os.getpid()}
+        doomed, grown = doomed | more, bool(more)
+    for pid in doomed:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except OSError:
+            pass
+
+
+@pytest.mark.slow
+def test_a_ray_cluster_started_by_hand_gives_the_local_bytes(workdir, tmp_path):  # noqa: F811
+    """A head and a second node started with `ray start` from a plain shell (none of the pinned variables), as
+    docs/reproducibility.md shows; `hnsdt train` and `hnsdt evaluate --executor ray` on it, as fresh processes
+    with RAY_ADDRESS set, write the bytes of the local executor's run."""
+    import socket
+    import subprocess
+    import tempfile
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    temp = Path(tempfile.mkdtemp(prefix="hnsdt-ray-", dir="/tmp"))  # (Ray's socket paths must stay short)
+    plain = _plain_environment() | {"RAY_AUTH_MODE": "token"}  # (Ray 2.60: a joining node and a driver
+    # need it to present the token the head wrote to ~/.ray)
+    head = ["ray", "start", "--head", "--num-cpus", "1", "--port", str(port), "--temp-dir", str(temp),
+            "--include-dashboard", "false", "--disable-usage-stats"]
+    node = ["ray", "start", "--address", f"127.0.0.1:{port}", "--num-cpus", "1", "--disable-usage-stats"]
+    train = ["train", "--env", "keydoor", "--method", "hnsdt", "--quiet", "--seed", "0", "1",
+             "--dataset", workdir / "data/datasets/keydoor"]
+    evaluate = ["evaluate", "--models", workdir / "models", "--quiet"]
+    try:
+        for command in (head, node):
+            out = subprocess.run(command, env=plain, capture_output=True, text=True, timeout=120)
+            assert out.returncode == 0, out.stdout[-2000:] + out.stderr[-2000:]
+        for name, how, env in (("local", ["--workers", "1"], None),
+                               ("cluster", ["--executor", "ray"], plain | {"RAY_ADDRESS": f"127.0.0.1:{port}"})):
+            for args in ([*train, "--out", tmp_path / name / "models", "--curves", tmp_path / name / "curves"],
+                         [*evaluate, "--out", tmp_path / name / "results", "--recordings", tmp_path / name / "rec"]):
+                if env is None:
+                    out = hnsdt(*args, *how, cwd=workdir)
+                else:  # a fresh `hnsdt` process, as a user's shell starts it
+                    out = subprocess.run(["hnsdt", *map(str, args), *how], cwd=workdir, env=env,
+                                         capture_output=True, text=True, timeout=600)
+                assert out.returncode == 0, f"{name}: {out.stderr[-3000:]}"
+    finally:
+        _kill_processes_naming(str(temp))
+        shutil.rmtree(temp, ignore_errors=True)
+    for sub in ("models", "curves", "results"):
+        assert _files(tmp_path / "cluster" / sub) == _files(tmp_path / "local" / sub), f"{sub} differ on the cluster"

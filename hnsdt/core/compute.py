@@ -122,10 +122,10 @@ def _run_ray(fn: Callable, tasks: list, compute: Compute, bar) -> list:
         import ray
     except ImportError:
         raise RuntimeError("compute.executor is ray but Ray is not installed: pip install -e '.[ray]'") from None
-    from hnsdt.core.reproducible import PINNED_CPU
+    from hnsdt.core.reproducible import pinned_environment
 
-    if not ray.is_initialized():
-        env = {k: os.environ.get(k, v) for k, v in PINNED_CPU.items()} | {"PYTHONHASHSEED": "0"}
+    if not ray.is_initialized():  # the workers of a cluster started by hand inherit none of the driver's pinned
+        env = pinned_environment()  # variables: each task's runtime environment carries every one of them
         ray.init(address=os.environ.get("RAY_ADDRESS"), runtime_env={"env_vars": env},
                  include_dashboard=False, log_to_driver=False, configure_logging=False)
     remote = ray.remote(num_cpus=compute.threads)(_call)
