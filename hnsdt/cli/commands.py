@@ -164,12 +164,13 @@ def cmd_replay(args) -> None:
 
 
 def _replay_dataset(args) -> None:
-    from hnsdt.logs import record_from_dataset, write_mcap, write_rrd
+    from hnsdt.core.fileio import write_files
+    from hnsdt.logs import record_from_dataset, recording_files
 
     rec = record_from_dataset(args.dataset, args.episode)
     out = Path(args.out or f"{Path(args.dataset).name}-ep{args.episode}.rrd")
-    write_rrd(out, rec, episode_index=args.episode)
-    write_mcap(out.with_suffix(".mcap"), rec)
+    files = recording_files(rec, episode_index=args.episode)
+    write_files({out: files[".rrd"], out.with_suffix(".mcap"): files[".mcap"]})
     print(f"episode {args.episode} of {args.dataset}: {rec.length} frames, success={rec.success}, "
           f"sub-goals: {' -> '.join(s[0] for s in rec.segments) or 'none'}")
     print(f"  {out}\n  {out.with_suffix('.mcap')}")
@@ -194,11 +195,9 @@ def _params_with_drawn(args):
 
 def _write_recording(files: dict[str, bytes], out: Path) -> Path:
     """An episode made again: its ``.rrd`` at ``out`` and its ``.mcap`` beside it."""
-    from hnsdt.core.fileio import atomic_file
+    from hnsdt.core.fileio import write_files
 
-    for path, data in ((out, files[".rrd"]), (out.with_suffix(".mcap"), files[".mcap"])):
-        with atomic_file(path) as tmp:
-            tmp.write_bytes(data)
+    write_files({out: files[".rrd"], out.with_suffix(".mcap"): files[".mcap"]})
     print(f"  {out}\n  {out.with_suffix('.mcap')}\n  (the same steps as evaluated)")
     return out
 

@@ -14,9 +14,11 @@ fail_prob, seed, behaviour policy, outcome), and ``README.md`` is the dataset ca
 from __future__ import annotations
 
 import contextlib
+import gc
 import json
 import logging
 import os
+import traceback
 from pathlib import Path
 
 import numpy as np
@@ -114,8 +116,14 @@ def write_dataset(root: str | Path, repo_id: str, layout: Layout | list[Layout],
                 for ep in tqdm(episodes, desc=f"write {root.name}", unit="episode", disable=not progress):
                     _add_episode(ds, ep, features, draw, view)
                     ds.save_episode()
-        finally:
             ds.finalize()
+        except BaseException as e:  # (a full disk): LeRobot's writers, still open, flush again when collected
+            with contextlib.suppress(Exception):
+                ds.finalize()
+            traceback.clear_frames(e.__traceback__)  # the failed calls' frames hold them: collect them now,
+            ds = None  # while the staging folder is still there to be removed, not after (it came back) and
+            gc.collect()  # with their files still open (a tmpfs would not give the space back)
+            raise
         info = ds.meta.info
         del ds
         rows = [dict(ep["meta"], episode_index=i) for i, ep in enumerate(episodes)]

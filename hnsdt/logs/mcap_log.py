@@ -5,6 +5,7 @@ state, action, sub-goal and reward; and the Foxglove layout that opens those top
 
 from __future__ import annotations
 
+import io
 import json
 from pathlib import Path
 
@@ -72,39 +73,48 @@ def draw_path(img: np.ndarray, path: np.ndarray) -> np.ndarray:
 
 def write_mcap(path: str | Path, rec: EpisodeRecord) -> Path:
     path = Path(path)  # atomic_file creates the parent folder
+    data = mcap_bytes(rec)
     with atomic_file(path) as tmp:
-        ctx = foxglove.Context()  # a context of its own, so channels never leak between files
-        writer = foxglove.open_mcap(str(tmp), allow_overwrite=True, context=ctx)
-        try:
-            grid = RawImageChannel("/grid", context=ctx)
-            events = LogChannel("/events", context=ctx)
-            steps = foxglove.Channel("/step", schema=STEP_SCHEMA, message_encoding="json", context=ctx)
-            dt_ns = int(1e9 / rec.fps)
-            cum, prev = 0.0, None
-            walked = np.zeros(np.multiply(rec.layout.shape, CELL_PX), dtype=bool)  # the way's pixels so far
-            for t in range(rec.length):
-                ns = t * dt_ns
-                stamp = Timestamp(sec=ns // 10**9, nsec=ns % 10**9)
-                if t:
-                    trace_step(walked, rec.states[t - 1], rec.states[t])
-                img = draw_path(render_rgb(rec.layout, rec.states[t]), walked)
-                grid.log(RawImage(timestamp=stamp, frame_id="grid", width=img.shape[1], height=img.shape[0],
-                                  encoding="rgb8", step=img.shape[1] * 3, data=img.tobytes()), log_time=ns)
-                name = ID_TO_NAME[int(rec.subgoal_ids[t])]
-                if name != prev:
-                    events.log(Log(timestamp=stamp, level=LogLevel.Info, message=f"sub-goal -> {name}",
-                                   name="executor"), log_time=ns)
-                    prev = name
-                action = int(rec.actions[t])
-                events.log(Log(timestamp=stamp, level=LogLevel.Debug, message=f"action {ACTION_NAMES[action]}",
-                               name="policy"), log_time=ns)
-                cum += float(rec.rewards[t])
-                steps.log(json.dumps({
-                    "episode_id": rec.episode_id, "step": t, "state": [int(v) for v in rec.states[t]],
-                    "state_names": rec.layout.state_names, "action": action, "action_name": ACTION_NAMES[action],
-                    "subgoal_id": int(rec.subgoal_ids[t]), "subgoal": name, "reward": float(rec.rewards[t]),
-                    "return": cum,
-                }), log_time=ns)
-        finally:
-            writer.close()
+        tmp.write_bytes(data)
     return path
+
+
+def mcap_bytes(rec: EpisodeRecord) -> bytes:
+    """The episode's ``.mcap`` file, encoded in memory: the SDK's own file writer reports a full disk without
+    its errno ("attempted another write after a write method failed"); written by Python, it is an ``OSError``."""
+    ctx = foxglove.Context()  # a context of its own, so channels never leak between files
+    buffer = io.BytesIO()
+    writer = foxglove.open_mcap(buffer, context=ctx)
+    try:
+        grid = RawImageChannel("/grid", context=ctx)
+        events = LogChannel("/events", context=ctx)
+        steps = foxglove.Channel("/step", schema=STEP_SCHEMA, message_encoding="json", context=ctx)
+        dt_ns = int(1e9 / rec.fps)
+        cum, prev = 0.0, None
+        walked = np.zeros(np.multiply(rec.layout.shape, CELL_PX), dtype=bool)  # the way's pixels so far
+        for t in range(rec.length):
+            ns = t * dt_ns
+            stamp = Timestamp(sec=ns // 10**9, nsec=ns % 10**9)
+            if t:
+                trace_step(walked, rec.states[t - 1], rec.states[t])
+            img = draw_path(render_rgb(rec.layout, rec.states[t]), walked)
+            grid.log(RawImage(timestamp=stamp, frame_id="grid", width=img.shape[1], height=img.shape[0],
+                              encoding="rgb8", step=img.shape[1] * 3, data=img.tobytes()), log_time=ns)
+            name = ID_TO_NAME[int(rec.subgoal_ids[t])]
+            if name != prev:
+                events.log(Log(timestamp=stamp, level=LogLevel.Info, message=f"sub-goal -> {name}",
+                               name="executor"), log_time=ns)
+                prev = name
+            action = int(rec.actions[t])
+            events.log(Log(timestamp=stamp, level=LogLevel.Debug, message=f"action {ACTION_NAMES[action]}",
+                           name="policy"), log_time=ns)
+            cum += float(rec.rewards[t])
+            steps.log(json.dumps({
+                "episode_id": rec.episode_id, "step": t, "state": [int(v) for v in rec.states[t]],
+                "state_names": rec.layout.state_names, "action": action, "action_name": ACTION_NAMES[action],
+                "subgoal_id": int(rec.subgoal_ids[t]), "subgoal": name, "reward": float(rec.rewards[t]),
+                "return": cum,
+            }), log_time=ns)
+    finally:
+        writer.close()
+    return buffer.getvalue()

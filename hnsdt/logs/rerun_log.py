@@ -64,13 +64,24 @@ def _plan_markdown(rec: EpisodeRecord) -> str:
 
 def write_rrd(path: str | Path, rec: EpisodeRecord, episode_index: int = 0) -> Path:
     path = Path(path)  # atomic_file creates the parent folder
+    data = rrd_bytes(rec, episode_index)
+    with atomic_file(path) as tmp:
+        tmp.write_bytes(data)
+    return path
+
+
+def rrd_bytes(rec: EpisodeRecord, episode_index: int = 0) -> bytes:
+    """The episode's ``.rrd`` file, encoded in memory: rerun's own file sink, once a full disk stops its writes,
+    waits in its flush forever; written by Python, a full disk is an ``OSError`` (:mod:`hnsdt.core.fileio`)."""
     # No wall clock in the file where rerun lets us leave it out: no start-time property, no `log_time`
     # timeline (rerun's row ids stay time-based, so the bytes still differ from run to run).
     stream = rr.RecordingStream("hnsdt", recording_id=rec.episode_id, send_properties=False)
     stream.set_log_time_enabled(False)
-    with atomic_file(path) as tmp:
-        _log_episode(stream, tmp, rec, episode_index)
-    return path
+    sink = rr.binary_stream(recording=stream)
+    _log_episode(stream, rec, episode_index)
+    data = sink.read(flush=True) or b""
+    stream.disconnect()
+    return data + (sink.read(flush=True) or b"")  # (what disconnecting ends the stream with)
 
 
 def _times(episode_index: int, steps) -> list[rr.TimeColumn]:
@@ -80,8 +91,7 @@ def _times(episode_index: int, steps) -> list[rr.TimeColumn]:
             rr.TimeColumn("step", sequence=steps)]
 
 
-def _log_episode(stream: rr.RecordingStream, tmp: Path, rec: EpisodeRecord, episode_index: int) -> None:
-    stream.save(str(tmp))
+def _log_episode(stream: rr.RecordingStream, rec: EpisodeRecord, episode_index: int) -> None:
     stream.send_blueprint(blueprint())
     stream.send_recording_name(rec.episode_id)
     stream.send_property("episode", rr.AnyValues(**recording_properties(rec)))
@@ -122,5 +132,3 @@ def _log_episode(stream: rr.RecordingStream, tmp: Path, rec: EpisodeRecord, epis
     events.sort(key=lambda e: e[0])  # stable: a step's sub-goal change before its action
     stream.send_columns("events", indexes=_times(episode_index, [t for t, _, _ in events]),
                         columns=rr.TextLog.columns(text=[m for _, m, _ in events], level=[lv for _, _, lv in events]))
-    stream.flush()
-    stream.disconnect()

@@ -5,15 +5,16 @@ subclasses of :class:`hnsdt.models.network.Network` in this package: each names 
 
 from __future__ import annotations
 
+import hashlib
 import importlib
 import json
 from dataclasses import asdict
 from pathlib import Path
 
 import torch
-from safetensors.torch import load_file, save_file
+from safetensors.torch import load, save
 
-from hnsdt.core.fileio import atomic_dir
+from hnsdt.core.fileio import atomic_dir, require_space
 from hnsdt.models.network import Network
 
 NETWORK_MODULES = ("dt", "qnetwork", "recurrent", "view")  # the modules of this package that define networks
@@ -39,8 +40,11 @@ def save_checkpoint(model: torch.nn.Module, out_dir: str | Path, extra: dict | N
     with atomic_dir(out) as tmp:
         tmp.mkdir()
         state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
-        save_file(state, str(tmp / "model.safetensors"))
-        meta = {"arch": model.arch, "model": asdict(model.cfg), **(extra or {})}
+        data = save(state)  # (safetensors' own file writer fails a full disk before writing: its size known here)
+        require_space(tmp / "model.safetensors", len(data))
+        (tmp / "model.safetensors").write_bytes(data)
+        meta = {"arch": model.arch, "model": asdict(model.cfg), **(extra or {}),
+                "weights_sha256": hashlib.sha256(data).hexdigest()}  # checked when loaded
         (tmp / "config.json").write_text(json.dumps(meta, indent=2, sort_keys=True) + "\n")
     return out
 
@@ -63,8 +67,14 @@ def load_checkpoint(path: str | Path, device: str = "cpu") -> tuple[torch.nn.Mod
         model = network(network.config_class(**meta["model"]))
     except (KeyError, TypeError, ValueError) as e:
         raise ValueError(f"checkpoint {path}: config.json does not describe a {arch} ({e})") from None
+    data = (path / "model.safetensors").read_bytes()
+    recorded = meta.get("weights_sha256")  # (checkpoints saved before it was recorded: none to check)
+    if recorded is not None and hashlib.sha256(data).hexdigest() != recorded:
+        raise ValueError(f"checkpoint {path}: model.safetensors is damaged (its sha256 is not the one config.json "
+                         f"recorded when it was saved): `dvc checkout {path.parent}` restores the committed copy "
+                         "from DVC's cache; if that is damaged too, `dvc repro --force` the stage that trained it")
     try:
-        weights = load_file(str(path / "model.safetensors"), device=device)
+        weights = {k: v.to(device) for k, v in load(data).items()}
     except Exception as e:  # noqa: BLE001  (safetensors raises its own error type for a damaged file)
         raise ValueError(f"checkpoint {path}: model.safetensors is unreadable ({type(e).__name__}: {e})") from None
     try:

@@ -25,11 +25,14 @@ def guarded(fn: Callable[..., object], *args, **kwargs) -> int:
     """``fn(*args, **kwargs)`` under the command line's error contract: 0, or 2 after one ``hnsdt: error:`` line
     naming the problem (the ``hnsdt`` command and every stage script use it); with ``HNSDT_DEBUG=1`` the
     traceback follows it."""
+    from hnsdt.core.fileio import disk_full
     from hnsdt.envs import LayoutError
 
     try:
         fn(*args, **kwargs)
-    except (LayoutError, ValueError, RuntimeError, OSError) as e:  # (a ParamsError is a ValueError)
+    except Exception as e:
+        if not isinstance(e, (LayoutError, ValueError, RuntimeError, OSError)) and not disk_full(e):
+            raise  # a bug: its traceback (a ParamsError is a ValueError; a full disk in any library is bad luck)
         print("hnsdt: error: " + " ".join(str(e).split()), file=sys.stderr)  # always one line
         if os.environ.get(DEBUG_VARIABLE, "") not in ("", "0"):
             traceback.print_exc()
