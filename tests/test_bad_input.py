@@ -144,6 +144,17 @@ def _truncate_parquet(ds: Path) -> None:
     data.write_bytes(data.read_bytes()[: data.stat().st_size // 2])
 
 
+def _flip_one_bit(f: Path, at: int) -> None:
+    data = bytearray(f.read_bytes())
+    data[at] ^= 0x01
+    f.write_bytes(bytes(data))
+
+
+def _flip_a_data_bit(ds: Path) -> None:
+    data = sorted((ds / "data").rglob("*.parquet"))[0]
+    _flip_one_bit(data, data.stat().st_size // 2)
+
+
 def _wrong_dtype(ds: Path) -> None:
     info = json.loads((ds / "meta/info.json").read_text())
     info["features"]["action"]["dtype"] = "float32"
@@ -158,7 +169,8 @@ def _zero_episodes(ds: Path) -> None:
 
 DATASET_CASES = {
     "missing meta/info.json": (_drop_info, "missing meta/info.json"),
-    "truncated parquet": (_truncate_parquet, "cannot read"),
+    "truncated parquet": (_truncate_parquet, "its data files are damaged"),
+    "one bit flipped in a parquet file": (_flip_a_data_bit, "its data files are damaged (their md5 is not"),
     "feature with the wrong dtype": (_wrong_dtype, "feature 'action' has dtype float32, expected int64"),
     "zero episodes": (_zero_episodes, "no episodes"),
 }
@@ -188,6 +200,11 @@ def _truncate_weights(models: Path) -> None:
     f.write_bytes(f.read_bytes()[:100])
 
 
+def _flip_a_weight_bit(models: Path) -> None:  # (a float's low bit: it loads, and acts almost alike)
+    f = models / "keydoor/hnsdt/seed0/model.safetensors"
+    _flip_one_bit(f, f.stat().st_size - 8)
+
+
 def _mismatched_config(models: Path) -> None:
     f = models / "keydoor/hnsdt/seed0/config.json"
     meta = json.loads(f.read_text())
@@ -200,7 +217,8 @@ def _missing_seed(models: Path) -> None:
 
 
 CHECKPOINT_CASES = {
-    "truncated safetensors": (_truncate_weights, "model.safetensors"),
+    "truncated safetensors": (_truncate_weights, "model.safetensors is damaged"),
+    "one bit flipped in model.safetensors": (_flip_a_weight_bit, "model.safetensors is damaged (its sha256 is not"),
     "config that does not match the weights": (_mismatched_config, "do not match"),
     "missing seed": (_missing_seed, "seed0: missing model.safetensors"),
 }

@@ -56,6 +56,19 @@ def check_dataset(root: str | Path) -> dict:
     return meta
 
 
+def check_data_files(root: Path) -> None:
+    """The data files are the bytes the collector wrote: their md5 (``meta/hnsdt.json``'s ``data_md5``, which
+    the card cites) is checked before any frame is read, so a damaged file — truncated or one bit flipped, in the
+    workspace or in DVC's cache it came from — stops with what to run, never with a wrong number."""
+    from hnsdt.data.card import data_md5
+
+    recorded = json.loads((root / HNSDT_META).read_text()).get("data_md5")
+    if recorded is not None and data_md5(root) != recorded:
+        raise DatasetError(f"dataset {root}: its data files are damaged (their md5 is not the {recorded} recorded "
+                           f"when it was written): `dvc checkout {root}` restores the committed copy from DVC's "
+                           "cache; if that is damaged too, `dvc repro --force` the stage that collected it")
+
+
 def episode_table(root: str | Path) -> pd.DataFrame:
     """One row per episode (behaviour, fail_prob, seed, outcome, ...), in episode order."""
     check_dataset(root)
@@ -73,6 +86,7 @@ def frame_columns(root: str | Path, names: list[str]) -> dict[str, np.ndarray]:
     files = sorted((root / "data").rglob("*.parquet"))
     if not files:
         raise DatasetError(f"dataset {root}: no data/**/*.parquet files")
+    check_data_files(root)
     try:
         table = pa.concat_tables([pq.read_table(f, columns=[*names, "index"]) for f in files])
     except (pa.ArrowException, OSError) as e:
