@@ -47,7 +47,8 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 TINY_PIPELINE = "test_pipeline.py"  # runs the tiny pipeline's first `dvc repro` (its first test's fixture)
-AFTER_THE_PIPELINE_RUN = {"test_pipeline_resume.py", "test_pipeline_use.py"}  # files that copy that run (below)
+AFTER_THE_PIPELINE_RUN = {"test_pipeline_resume.py", "test_pipeline_use.py",  # files that copy that run (below)
+                          "test_pipeline_concurrent.py"}
 # test_pipeline.py's tests build on each other's repo: they run whole on one worker, in order. The other files
 # that need the run copy it for themselves (each test file its own copy): their tests go to whichever worker is
 # free once the run is there, so that neither worker ends alone on them
