@@ -7,7 +7,7 @@ VENV := .venv
 BIN := $(CURDIR)/$(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install pipeline test test-fast bench compare lock clean-venv
+.PHONY: soak install pipeline test test-fast bench compare lock clean-venv
 
 install: $(STAMP)
 
@@ -29,7 +29,11 @@ test: $(STAMP)
 
 # Tier 1 only: unit tests and tiny-budget smoke runs of every method (about a minute), for the edit-test loop.
 test-fast: $(STAMP)
-	PATH="$(BIN):$$PATH" python -m pytest -m "not slow and not learning"
+	PATH="$(BIN):$$PATH" python -m pytest -m "not slow and not learning and not soak"
+
+# The soak: the tiny pipeline SIGKILLed at 20 seeded random moments, resumed each time (minutes; CI runs it).
+soak: $(STAMP)
+	PATH="$(BIN):$$PATH" python -m pytest -m soak -n 0
 
 # The committed run beside its experiments (`dvc exp run -S KNOB=VALUE`): the changed knobs and metrics, one row
 # each, within 200 columns (tools/compare.py; `make compare ARGS=--all` for every commit's experiments).

@@ -1,0 +1,63 @@
+"""Kills anywhere: the tiny pipeline run from scratch, SIGKILLed at 20 seeded random moments across its stages and
+resumed with `dvc repro` each time, ends with the bytes of the uninterrupted run (conftest's ``pipeline_run``).
+Its own tier (`make soak`, which CI runs after `make test`): about three minutes of work."""
+
+import os
+import random
+import signal
+import subprocess
+import time
+
+import pytest
+
+from hnsdt.core.fileio import TMP_PREFIX
+from tiny_repo import ENV, lock_outs, make_tiny_repo, run
+
+pytestmark = [pytest.mark.slow, pytest.mark.soak]
+
+KILLS = 20
+SEED = 20261205
+
+
+def _stages_started(log: str) -> list[str]:
+    return [line.split("'")[1] for line in log.splitlines() if line.startswith("Running stage '")]
+
+
+def test_twenty_kills_anywhere_end_in_the_uninterrupted_run_s_bytes(tmp_path, first_run):
+    """Each run is killed once it has started its first or second stage (at random) and a random 0–3 s more:
+    inside a stage's imports, training or writing, or in DVC's bookkeeping between stages. A run that finishes
+    before its kill leaves the pipeline up to date; the next one then forces a random stage and everything
+    downstream of it, so that all twenty kills land."""
+    repo = make_tiny_repo(tmp_path / "repo")
+    order = _stages_started(first_run[0])  # the pipeline's stages, in the order the uninterrupted run ran them
+    rng = random.Random(SEED)
+    killed_in, runs, up_to_date = [], 0, False
+    while len(killed_in) < KILLS:
+        runs += 1
+        assert runs <= 3 * KILLS, f"only {len(killed_in)} kills in {runs - 1} runs: {killed_in}"
+        args = ["dvc", "repro"] if not up_to_date else ["dvc", "repro", "--force", "--downstream", rng.choice(order)]
+        nth, delay = rng.choice([1, 2]), rng.uniform(0.0, 3.0)
+        log = tmp_path / f"run{runs}.log"
+        with open(log, "w") as f:
+            proc = subprocess.Popen(args, cwd=repo, env=ENV, stdout=f, stderr=subprocess.STDOUT,
+                                    start_new_session=True)
+        deadline = time.monotonic() + 300
+        while len(_stages_started(log.read_text())) < nth and proc.poll() is None:
+            assert time.monotonic() < deadline, f"run {runs} started no stage:\n{log.read_text()[-2000:]}"
+            time.sleep(0.02)
+        time.sleep(delay)
+        if proc.poll() is not None:  # it finished first
+            assert proc.returncode == 0, log.read_text()[-3000:]
+            up_to_date = True
+            continue
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.wait()
+        killed_in.append(_stages_started(log.read_text())[-1])
+        up_to_date = False
+    assert len(set(killed_in)) >= 8, killed_in  # spread across the stages, not one stage twenty times
+    run(["dvc", "repro"], repo)  # resumed once more, to the end
+    assert not list(repo.rglob(f"{TMP_PREFIX}*")), "temporaries of killed writes were not cleaned up"
+    outs, reference = lock_outs(repo), first_run[1]
+    assert outs.keys() == reference.keys()
+    assert {k for k in outs if outs[k] != reference[k]} <= {"evaluate:recordings"}, killed_in
+    print(f"{KILLS} kills in {runs} runs, in {len(set(killed_in))} stages: {killed_in}")
