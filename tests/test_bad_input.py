@@ -238,6 +238,28 @@ def test_replay_of_an_episode_that_does_not_exist(workdir, tmp_path):
     assert _outputs(w) == before
 
 
+def _truncate(f: Path) -> None:
+    f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+
+
+def _flip_a_third_in(f: Path) -> None:
+    _flip_one_bit(f, f.stat().st_size // 3)
+
+
+@pytest.mark.parametrize("suffix, damage", [(".rrd", _truncate), (".mcap", _flip_a_third_in)],
+                         ids=["truncated rrd", "one bit flipped in an mcap"])
+def test_replay_of_a_damaged_recording(workdir, tmp_path, suffix, damage):
+    """A damaged kept recording: replay names it and what to run, instead of handing it out. (An .rrd has no
+    checksum: `rerun rrd verify` finds a truncation or a broken record, not a bit flipped inside an image.)"""
+    w = _case_dir(workdir, tmp_path)
+    assert hnsdt("evaluate", "--quiet", cwd=w).returncode == 0
+    recording = (w / "recordings/hnsdt/keydoor/fp0.1/seed0/ep0").with_suffix(suffix)
+    assert hnsdt("replay", "hnsdt/keydoor/fp0.1/seed0/ep0", cwd=w).returncode == 0  # intact: handed out
+    damage(recording)
+    out = hnsdt("replay", "hnsdt/keydoor/fp0.1/seed0/ep0", cwd=w)
+    assert_one_error_line(out, f"recording recordings/hnsdt/keydoor/fp0.1/seed0/ep0{suffix} is damaged")
+
+
 def test_a_dataset_without_an_operator_s_segments_stops_training(tmp_path):
     """The paper's HNSDT learns from random exploration only: a dataset with none cannot teach it PickKey,
     OpenDoor or Move, and training says so before it starts."""

@@ -136,7 +136,7 @@ def cmd_replay(args) -> None:
 
     if args.dataset is not None:
         return _replay_dataset(args)
-    from hnsdt.stages.replay import find_episodes, record_again
+    from hnsdt.stages.replay import check_recording, find_episodes, record_again
 
     params = _params_with_drawn(args)
     found = find_episodes(params, args.episode_id, args.experiment, Path(args.results) if args.results else None,
@@ -148,6 +148,7 @@ def cmd_replay(args) -> None:
     rrds = []
     for f in found:
         if f.recorded is not None:
+            check_recording(f.recorded)
             rrds.append(f.recorded)
             print(f"  {f.recorded}\n  {f.recorded.with_suffix('.mcap')}")
             continue

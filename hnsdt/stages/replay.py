@@ -39,6 +39,42 @@ class Found:
         return self.table.parent.parent / rrd if isinstance(rrd, str) and rrd else None
 
 
+def check_recording(rrd: Path) -> None:
+    """A kept recording is the bytes the evaluation wrote, checked before it is handed out: the ``.rrd`` passes
+    ``rerun rrd verify``, the ``.mcap`` beside it reads to its end and its data section matches the CRC its writer
+    recorded (a flipped bit in an image passes the reader otherwise). Raises ValueError naming the file."""
+    import io
+    import shutil
+    import subprocess
+    import sys
+    import zlib
+
+    from mcap.records import DataEnd, Footer
+    from mcap.stream_reader import StreamReader
+
+    def damaged(path: Path, why: str) -> ValueError:
+        return ValueError(f"recording {path} is damaged ({why}): `dvc checkout` restores the committed recordings "
+                          "from DVC's cache; or delete it, and `hnsdt replay` of this episode records it anew")
+
+    for path in (rrd, rrd.with_suffix(".mcap")):
+        if not path.is_file():
+            raise damaged(path, "missing")
+    rerun = shutil.which("rerun") or str(Path(sys.executable).parent / "rerun")
+    verify = subprocess.run([rerun, "rrd", "verify", str(rrd)], capture_output=True, text=True)
+    if verify.returncode != 0:
+        raise damaged(rrd, "`rerun rrd verify` fails: " + " ".join((verify.stderr or verify.stdout).split())[:200])
+    mcap = rrd.with_suffix(".mcap")
+    data = mcap.read_bytes()
+    try:
+        records = list(StreamReader(io.BytesIO(data), skip_magic=False, validate_crcs=True).records)
+        footer = next(r for r in records if isinstance(r, Footer))
+        crc = next(r for r in records if isinstance(r, DataEnd)).data_section_crc
+    except Exception as e:  # noqa: BLE001  (the mcap reader raises many kinds on a damaged file)
+        raise damaged(mcap, f"unreadable: {type(e).__name__}") from None
+    if crc and zlib.crc32(data[:footer.summary_start - 13]) != crc:  # (13: the DataEnd record itself)
+        raise damaged(mcap, "its data section does not match the CRC its writer recorded")
+
+
 def experiments(params: Params) -> dict[str, tuple[Path, Path]]:
     """Every experiment of ``params`` -> its results and models folders, as the pipeline writes them."""
     out = {PAPER: (Path("results"), Path("models")),
