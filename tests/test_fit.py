@@ -1,6 +1,7 @@
 """A training run stopped between epochs and continued elsewhere ends in the same bytes as one run in one go;
 the executor queues a task's continuation behind the waiting tasks and returns results in task order."""
 
+import contextlib
 import pickle
 from dataclasses import replace
 
@@ -150,6 +151,66 @@ def test_one_worker_runs_its_tasks_through_the_pickles_of_a_pool():
 
 def _same(task):
     return task
+
+
+def _logged(task: tuple[str, str, bool]):
+    """Appends its label to the file ``log`` (a count of the tasks that ran), then fails if told to."""
+    label, log, fail = task
+    with open(log, "a") as f:
+        f.write(label + "\n")
+    if fail:
+        raise RuntimeError(f"{label} failed")
+    return f"{label} done"
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_tasks_finished_before_a_run_stopped_are_not_run_again(tmp_path, workers, monkeypatch, capsys):
+    """With ``keep``, each finished task's result is kept as it finishes: a run that stops part-way (here a
+    task that fails; in a stage, a kill) and is started again runs only the tasks that had not finished, says
+    so, and returns every result in task order. A kept result is taken only for the same task of the same code:
+    another task, or the same task after the code changed, runs again. Fails when nothing is kept (every task
+    runs twice) or a result is taken for another task."""
+    from hnsdt.core import compute
+
+    log, keep = tmp_path / "log", tmp_path / "kept"
+    tasks = [(label, str(log), label == "c") for label in "abcd"]
+    with pytest.raises(RuntimeError, match="c failed"):
+        run_tasks(_logged, tasks, Compute(workers=workers), progress=False, keep=keep)
+    kept = len(list(keep.glob("*.pkl")))  # a, b with one worker; with two, those done before c's failure came
+    assert kept >= (2 if workers == 1 else 1)
+    log.write_text("")
+    tasks[2] = ("c", str(log), False)  # (mended: another task, which runs)
+    out = run_tasks(_logged, tasks, Compute(workers=workers), progress=False, keep=keep)
+    assert out == ["a done", "b done", "c done", "d done"]
+    ran = log.read_text().split()
+    assert "c" in ran and len(ran) == 4 - kept
+    assert "runs finished before this one was stopped" in capsys.readouterr().out
+    log.write_text("")
+    assert run_tasks(_logged, tasks, Compute(workers=1), progress=False, keep=keep) == out
+    assert log.read_text() == ""  # all four kept
+    monkeypatch.setattr(compute, "_CODE_DIGEST", ["other code"])
+    assert run_tasks(_logged, tasks[:1], Compute(workers=1), progress=False, keep=keep) == out[:1]
+    assert log.read_text().split() == ["a"]  # another code: not taken
+
+
+def test_a_stage_keeps_finished_tasks_only_while_killed(tmp_path):
+    """The folder of kept results goes when the block ends, with the output written or with an error (which
+    is an end, not a kill), and stays after an interrupt (Ctrl-C) for the next run."""
+    from hnsdt.core.fileio import finished_tasks
+
+    out = tmp_path / "models"
+    for error in (None, RuntimeError):
+        with contextlib.suppress(RuntimeError):
+            with finished_tasks(out) as keep:
+                keep.mkdir()
+                if error:
+                    raise error("stop")
+        assert not keep.exists()
+    with contextlib.suppress(KeyboardInterrupt):
+        with finished_tasks(out) as keep:
+            keep.mkdir()
+            raise KeyboardInterrupt
+    assert keep.is_dir() and keep.name.startswith(".hnsdt-tmp-models")
 
 
 def test_episode_batches_hold_each_episode_once_and_close_at_the_batch_size():

@@ -59,7 +59,10 @@ def work(tmp_path_factory):
     (root / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
     for args in (["collect", "--env", "keydoor", "--out", "data/datasets/keydoor"],
                  ["train", "--env", "keydoor", "--method", "hnsdt", "--out", "models/keydoor/hnsdt", "--curves", "c"],
-                 ["evaluate", "--out", "results", "--recordings", "recordings"]):
+                 ["evaluate", "--out", "results", "--recordings", "recordings"],
+                 ["generalisation", "collect", "--out", "unseen/dataset"],
+                 ["generalisation", "train", "--method", "hnsdt", "--dataset", "unseen/dataset", "--out",
+                  "unseen/models/hnsdt", "--curves", "unseen/curves"]):
         out = hnsdt(*args, "--quiet", cwd=root)
         assert out.returncode == 0, out.stderr[-2000:]
     return root
@@ -75,6 +78,10 @@ COMMANDS = {
     "replay": lambda out: ["replay", "--dataset", "data/datasets/keydoor", "--episode", "1", "--out",
                            out / "episode.rrd"],
     "generalisation collect": lambda out: ["generalisation", "collect", "--out", out / "dataset", "--quiet"],
+    "generalisation train": lambda out: ["generalisation", "train", "--method", "hnsdt", "--dataset", "unseen/dataset",
+                                         "--out", out / "models", "--curves", out / "curves", "--quiet"],
+    "generalisation evaluate": lambda out: ["generalisation", "evaluate", "--models", "unseen/models", "--methods",
+                                            "hnsdt", "--out", out / "results", "--quiet"],
 }
 
 

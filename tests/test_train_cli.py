@@ -48,6 +48,42 @@ def test_executors_and_worker_counts_give_the_same_bytes(workdir, tmp_path):  # 
             assert _files(tmp_path / name / sub) == reference[sub], f"{name} {sub} differ from one process"
 
 
+@pytest.mark.slow
+def test_a_training_killed_after_a_seed_finished_trains_only_the_others_again(workdir, tmp_path):  # noqa: F811
+    """`hnsdt train` of two seeds in one process, SIGKILLed once the first has finished (its result kept beside
+    the output) and before the output is written, then run again: it says it takes the finished seed, trains
+    only the other, and writes the bytes of a run never killed; nothing is left beside the output. Fails when
+    nothing is kept (the message is missing) or a kept seed is taken for another."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    def command(name):
+        return [sys.executable, "-m", "hnsdt.cli", "train", "--env", "keydoor", "--method", "hnsdt", "--quiet",
+                "--seed", "0", "1", "--workers", "1", "--dataset", str(workdir / "data/datasets/keydoor"),
+                "--out", str(tmp_path / name), "--curves", str(tmp_path / f"{name}-curves")]
+
+    reference = subprocess.run(command("reference"), cwd=workdir, capture_output=True, text=True)
+    assert reference.returncode == 0, reference.stderr[-2000:]
+    keep = tmp_path / ".hnsdt-tmp-killed-finished"
+    proc = subprocess.Popen(command("killed"), cwd=workdir, start_new_session=True, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    while not list(keep.glob("*.pkl")):
+        assert proc.poll() is None, "the training ended before its first seed was kept"
+        time.sleep(0.005)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert not (tmp_path / "killed").exists(), "the second seed finished before the kill: no test"
+    again = subprocess.run(command("killed"), cwd=workdir, capture_output=True, text=True)
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert "1 of 2 runs finished before this one was stopped" in again.stdout
+    for sub in ("killed", "killed-curves"):
+        assert _files(tmp_path / sub) == _files(tmp_path / sub.replace("killed", "reference"))
+    assert not keep.exists()
+
+
 def _plain_environment() -> dict[str, str]:
     """This process's environment less every variable the pipeline pins: what a shell that starts a Ray node
     by hand has."""

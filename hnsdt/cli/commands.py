@@ -226,12 +226,12 @@ def cmd_generalisation(args) -> None:
     params.need("generalisation")  # "missing key generalisation" before any work
     if not args.out:
         raise ValueError(f"generalisation {args.action} needs --out")
+    compute = compute_settings(params, args.executor, args.workers)
     if args.action == "collect":
         from hnsdt.stages.collect_unseen import collect_unseen
 
-        collect_unseen(params, Path(args.out), progress=not args.quiet)
+        collect_unseen(params, Path(args.out), progress=not args.quiet, compute=compute)
         return
-    compute = compute_settings(params, args.executor, args.workers)
     if args.action == "train":
         if not args.method or not args.curves:
             raise ValueError("generalisation train needs --method and --curves")

@@ -173,11 +173,12 @@ def train_run(task: TrainTask | SeedStack):
 
 def train_all(runs: list[TrainTask], env: str, out: Path, curves: Path, compute, progress: bool = True) -> None:
     """Run every seed's task on ``compute`` (an online learner's seeds in stacks, :func:`seed_stacks`) and write
-    ``out/seedK/`` checkpoints and ``curves/seedK.csv``, each folder complete or absent."""
+    ``out/seedK/`` checkpoints and ``curves/seedK.csv``, each folder complete or absent; a seed finished by a
+    run that was killed is taken from what it kept (:func:`hnsdt.core.fileio.finished_tasks`)."""
     import pandas as pd
 
     from hnsdt.core.compute import run_tasks
-    from hnsdt.core.fileio import atomic_dir
+    from hnsdt.core.fileio import atomic_dir, finished_tasks
     from hnsdt.models.checkpoint import save_checkpoint
 
     inline = compute.executor == "local" and compute.local_workers(len(runs)) == 1
@@ -186,17 +187,19 @@ def train_all(runs: list[TrainTask], env: str, out: Path, curves: Path, compute,
     tasks = [replace(r, progress=progress and inline) for r in runs]
     # seeds paused part-way where they share workers (in one process a pause would only cost a model rebuild)
     tasks = seed_stacks(tasks, compute) if online else [replace(t, split=not inline) for t in tasks]
-    results = run_tasks(train_run, tasks, compute, desc=f"train {env} {method}", progress=progress and not inline)
-    if online:
-        results = [result for stack in results for result in stack]
-    with atomic_dir(out) as staging, atomic_dir(curves) as curve_staging:
-        staging.mkdir()
-        curve_staging.mkdir()
-        for run, (model, facts, curve) in zip(runs, results):
-            save_checkpoint(model, staging / f"seed{run.seed}", {"env": env, "method": method, **facts})
-            pd.DataFrame(curve).to_csv(curve_staging / f"seed{run.seed}.csv", index=False)
-            print(f"trained {method} on {env}, seed {run.seed}: {_usage_text(facts['usage'])}; "
-                  f"final {_last_metric(curve)}", flush=True)
+    with finished_tasks(out) as keep:  # (a seed finished before a kill is not trained again)
+        results = run_tasks(train_run, tasks, compute, desc=f"train {env} {method}",
+                            progress=progress and not inline, keep=keep)
+        if online:
+            results = [result for stack in results for result in stack]
+        with atomic_dir(out) as staging, atomic_dir(curves) as curve_staging:
+            staging.mkdir()
+            curve_staging.mkdir()
+            for run, (model, facts, curve) in zip(runs, results):
+                save_checkpoint(model, staging / f"seed{run.seed}", {"env": env, "method": method, **facts})
+                pd.DataFrame(curve).to_csv(curve_staging / f"seed{run.seed}.csv", index=False)
+                print(f"trained {method} on {env}, seed {run.seed}: {_usage_text(facts['usage'])}; "
+                      f"final {_last_metric(curve)}", flush=True)
 
 
 def _usage_text(usage: dict) -> str:

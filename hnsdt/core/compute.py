@@ -11,6 +11,10 @@ as a new task — which goes to the back of the queue: a training seed hands bac
 * ``local`` (default): a pool of ``workers`` spawned processes (0 = one per core / threads); one worker runs
   the tasks in this process, each task and result through the same plain pickles as a pool's (so a task that
   would not cross to a worker fails here too).
+A stage that passes ``keep`` (:func:`hnsdt.core.fileio.finished_tasks`: a hidden folder beside its output) has
+each finished task's result kept there until its output is written: killed and started again, it computes only
+the tasks that had not finished (training seeds, evaluation cells), with the same bytes.
+
 * ``ray``: one Ray task per run, ``num_cpus = threads``. Connects to ``RAY_ADDRESS`` when it is set (a
   cluster whose nodes have this package installed at the same revision), otherwise starts a local Ray
   instance. The pinned CPU settings travel in the tasks' runtime environment.
@@ -21,6 +25,7 @@ from __future__ import annotations
 import os
 import pickle
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable
 
 EXECUTORS = ("local", "ray")
@@ -71,53 +76,130 @@ def _call_pickled(fn: Callable, threads: int, task: bytes) -> bytes:
 
 
 def run_tasks(fn: Callable, tasks: list, compute: Compute = Compute(), desc: str = "runs",
-              progress: bool = True) -> list:
-    """``[fn(task) for task in tasks]``, computed by ``compute``'s executor; results in task order."""
+              progress: bool = True, keep: Path | None = None) -> list:
+    """``[fn(task) for task in tasks]``, computed by ``compute``'s executor; results in task order. ``keep``: a
+    folder where each task's result is kept as soon as it is finished (:class:`Kept`), so that a run killed
+    part-way and started again computes only the tasks that had not finished; the caller removes it once the
+    results are written."""
     from tqdm import tqdm
 
-    bar = tqdm(total=len(tasks), desc=desc, unit="run", disable=not progress)
+    kept = Kept(keep, fn) if keep is not None else None
+    out = [kept.result(task) if kept else None for task in tasks]
+    todo = [i for i, result in enumerate(out) if result is None]
+    if len(todo) < len(tasks):
+        print(f"{desc}: {len(tasks) - len(todo)} of {len(tasks)} runs finished before this one was stopped; "
+              f"taken from {keep}", flush=True)
+    bar = tqdm(total=len(tasks), initial=len(tasks) - len(todo), desc=desc, unit="run", disable=not progress)
+
+    def finished(i: int, result: Any) -> None:
+        if kept:
+            kept.add(tasks[todo[i]], result)
+        out[todo[i]] = result
+        bar.update(1)
+
     try:
-        if compute.executor == "ray":
-            return _run_ray(fn, tasks, compute, bar)
-        workers = compute.local_workers(len(tasks))
-        if workers == 1:  # here, through the pickles a pool's tasks cross: what runs here would run there
-            def call(task):
-                return pickle.loads(_call_pickled(fn, compute.threads, _dumps(task)))
-
-            out = []
-            for task in tasks:
-                result = call(task)
-                while isinstance(result, Continue):
-                    result = call(result.task)
-                out.append(result)
-                bar.update(1)
-            return out
-        import multiprocessing
-        from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-
-        # spawn, not fork: a forked child would inherit torch's thread pools from this process.
-        with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            def submit(task):
-                return pool.submit(_call_pickled, fn, compute.threads, _dumps(task))
-
-            running = {submit(task): i for i, task in enumerate(tasks)}
-            out = [None] * len(tasks)
-            while running:
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
-                for future in sorted(done, key=running.get):
-                    i = running.pop(future)
-                    result = pickle.loads(future.result())
-                    if isinstance(result, Continue):
-                        running[submit(result.task)] = i
-                    else:
-                        out[i] = result
-                        bar.update(1)
-            return out
+        if todo:
+            (_run_ray if compute.executor == "ray" else _run_local)(fn, [tasks[i] for i in todo], compute, finished)
+        return [None if result is _NONE else result for result in out]
     finally:
         bar.close()
 
 
-def _run_ray(fn: Callable, tasks: list, compute: Compute, bar) -> list:
+_NONE = object()  # a kept result that is None
+
+
+class Kept:
+    """Finished tasks' results in a folder, one pickle each, named by a digest of the function, the task's pickle
+    and the code and library versions that computed it (:func:`code_digest`): a result is only ever taken
+    for the same task of the same code."""
+
+    def __init__(self, folder: Path, fn: Callable):
+        self.folder, self.fn = Path(folder), f"{fn.__module__}.{fn.__qualname__}"
+
+    def _path(self, task: Any) -> Path:
+        import hashlib
+
+        digest = hashlib.sha256(f"{code_digest()}\0{self.fn}\0".encode() + _dumps(task)).hexdigest()[:32]
+        return self.folder / f"{digest}.pkl"
+
+    def result(self, task: Any) -> Any:
+        """The kept result of ``task`` (``_NONE`` for a kept ``None``), or None when there is none."""
+        path = self._path(task)
+        if not path.is_file():
+            return None
+        try:
+            result = pickle.loads(path.read_bytes())
+        except Exception:  # noqa: BLE001  (a damaged pickle: computed again)
+            return None
+        return _NONE if result is None else result
+
+    def add(self, task: Any, result: Any) -> None:
+        """Keep ``result``; where it cannot be kept (a full disk) the run goes on without it."""
+        from hnsdt.core.fileio import atomic_file
+
+        try:
+            with atomic_file(self._path(task)) as tmp:
+                tmp.write_bytes(_dumps(result))
+        except OSError:
+            pass
+
+
+_CODE_DIGEST: list[str] = []
+
+
+def code_digest() -> str:
+    """sha256 over this package's source files (path and bytes), the versions of the libraries that compute
+    results, and the pinned environment: what a kept result must have been computed with."""
+    if not _CODE_DIGEST:
+        import hashlib
+        from importlib.metadata import version
+
+        from hnsdt.core.reproducible import pinned_environment
+
+        package = Path(__file__).resolve().parents[1]
+        h = hashlib.sha256()
+        for f in sorted(package.rglob("*.py")):
+            h.update(f.relative_to(package).as_posix().encode() + b"\0" + f.read_bytes())
+        for lib in ("torch", "numpy", "lerobot", "gymnasium", "minigrid"):
+            h.update(f"{lib}=={version(lib)}".encode())
+        h.update(repr(sorted(pinned_environment().items())).encode())
+        _CODE_DIGEST.append(h.hexdigest())
+    return _CODE_DIGEST[0]
+
+
+def _run_local(fn: Callable, tasks: list, compute: Compute, finished: Callable[[int, Any], None]) -> None:
+    workers = compute.local_workers(len(tasks))
+    if workers == 1:  # here, through the pickles a pool's tasks cross: what runs here would run there
+        def call(task):
+            return pickle.loads(_call_pickled(fn, compute.threads, _dumps(task)))
+
+        for i, task in enumerate(tasks):
+            result = call(task)
+            while isinstance(result, Continue):
+                result = call(result.task)
+            finished(i, result)
+        return
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+    # spawn, not fork: a forked child would inherit torch's thread pools from this process.
+    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+        def submit(task):
+            return pool.submit(_call_pickled, fn, compute.threads, _dumps(task))
+
+        running = {submit(task): i for i, task in enumerate(tasks)}
+        while running:
+            done, _ = wait(running, return_when=FIRST_COMPLETED)
+            for future in sorted(done, key=running.get):
+                i = running.pop(future)
+                result = pickle.loads(future.result())
+                if isinstance(result, Continue):
+                    running[submit(result.task)] = i
+                else:
+                    finished(i, result)
+
+
+def _run_ray(fn: Callable, tasks: list, compute: Compute, finished: Callable[[int, Any], None]) -> None:
     try:
         import ray
     except ImportError:
@@ -130,7 +212,6 @@ def _run_ray(fn: Callable, tasks: list, compute: Compute, bar) -> list:
                  include_dashboard=False, log_to_driver=False, configure_logging=False)
     remote = ray.remote(num_cpus=compute.threads)(_call)
     running = {remote.remote(fn, compute.threads, task): i for i, task in enumerate(tasks)}
-    out = [None] * len(tasks)
     while running:
         done, _ = ray.wait(list(running), num_returns=1)
         i = running.pop(done[0])
@@ -138,6 +219,4 @@ def _run_ray(fn: Callable, tasks: list, compute: Compute, bar) -> list:
         if isinstance(result, Continue):
             running[remote.remote(fn, compute.threads, result.task)] = i
         else:
-            out[i] = result
-            bar.update(1)
-    return out
+            finished(i, result)

@@ -4,7 +4,7 @@ Temporaries are named ``.hnsdt-tmp-<name>-<pid>-<random>``; ``.gitignore`` and `
 pattern everywhere, so a process killed mid-write never leaves anything git or DVC could pick up, and the next
 write to the same destination removes what a dead process left behind. A write the file system cannot hold
 (``ENOSPC``, whichever library met it) removes its temporary and raises :class:`DiskFullError`, naming the
-destination and how much it had written when the disk filled.
+destination, the space it needed and the space that was free.
 """
 
 from __future__ import annotations
@@ -37,6 +37,22 @@ def remove_stale_temporaries(out: Path) -> None:
         pid = p.name[len(TMP_PREFIX) + len(out.name) + 1:].split("-")[0]
         if pid.isdigit() and not _pid_alive(int(pid)):
             shutil.rmtree(p, ignore_errors=True) if p.is_dir() else p.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def finished_tasks(out: str | Path):
+    """Yield where a stage keeps its finished tasks' results while it computes ``out`` (``run_tasks``' ``keep``:
+    :mod:`hnsdt.core.compute`): a hidden folder beside it, ignored by git and DVC like every temporary. Only a
+    killed (or interrupted: Ctrl-C) run leaves it, for the next run to take from; it is removed when the block
+    ends, with ``out`` written or with an error."""
+    out = Path(out)
+    keep = out.parent / f"{TMP_PREFIX}{out.name}-finished"
+    try:
+        yield keep
+    except Exception:
+        shutil.rmtree(keep, ignore_errors=True)
+        raise
+    shutil.rmtree(keep, ignore_errors=True)
 
 
 class DiskFullError(OSError):
@@ -85,11 +101,11 @@ def _disk_full_error(out: Path, work: Path, error: BaseException) -> DiskFullErr
 
 
 def _size(n: float) -> str:
-    for unit in ("B", "KiB", "MiB", "GiB"):
-        if n < 1024 or unit == "GiB":
+    for unit in ("B", "KiB", "MiB"):
+        if n < 1024:
             return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
         n /= 1024
-    return ""
+    return f"{n:.1f} GiB"
 
 
 def _temp_prefix(out: Path) -> str:

@@ -28,13 +28,18 @@ BIBTEX = """@inproceedings{baheri2025hnsdt,
 }"""
 
 
-def description(cfg, episodes: list[dict], layouts=None) -> str:
-    """The card's body: what the data are, how they were made, what they cover. ``layouts``: a dataset over
-    many layouts (``cfg.layout`` is then the first), which stores views."""
-    total = sum(len(ep["actions"]) for ep in episodes)
+def coverage(episodes: list[dict]) -> dict[str, Counter]:
+    """Frames per sub-goal id of each labelling (``subgoal_ids``, ``move_subgoal_ids``): the card's coverage
+    tables; the counts of two parts of a dataset add up."""
+    return {key: Counter(int(i) for ep in episodes for i in ep[key]) for key in ("subgoal_ids", "move_subgoal_ids")}
+
+
+def description(cfg, rows: list[dict], frames: dict[str, Counter], layouts=None) -> str:
+    """The card's body: what the data are, how they were made, what they cover (``rows``: the episodes' ``meta``
+    rows; ``frames``: their :func:`coverage`). ``layouts``: a dataset over many layouts (``cfg.layout`` is then the first), which stores views."""
+    total = sum(m["length"] for m in rows)
     by_behaviour: dict[tuple[str, float], list[bool]] = {}
-    for ep in episodes:
-        m = ep["meta"]
+    for m in rows:
         by_behaviour.setdefault((m["behaviour"], m["fail_prob"]), []).append(m["success"])
     where = f"on layout `{cfg.layout.name}`" if not layouts else (
         f"on {len(layouts)} generated layouts (`{layouts[0].name}` … `{layouts[-1].name}`; the first shown below, "
@@ -46,7 +51,7 @@ def description(cfg, episodes: list[dict], layouts=None) -> str:
         "with probability `fail_prob`.", "",
         "```", cfg.layout.text.rstrip(), "```", "",
         "`@` start, `G` exit, `#` wall, `a`–`z` keys, `A`–`Z` the doors they open, `0`–`9` items to collect.", "",
-        f"- episodes: {len(episodes)}, frames: {total}, fps: {cfg.fps}, max_steps: {cfg.max_steps}, "
+        f"- episodes: {len(rows)}, frames: {total}, fps: {cfg.fps}, max_steps: {cfg.max_steps}, "
         f"seed: {cfg.seed}",
         f"- fail_probs: {', '.join(f'{f:g}' for f in cfg.fail_probs)}",
         "- load offline: `LeRobotDataset(repo_id, root=<this folder>)`", "",
@@ -61,9 +66,9 @@ def description(cfg, episodes: list[dict], layouts=None) -> str:
     ]
     for key, title in (("subgoal_ids", "Sub-goal coverage (`subgoal`, GoTo operators)"),
                        ("move_subgoal_ids", "Sub-goal coverage of the paper's labelling (`move_subgoal`)")):
-        frames = Counter(ID_TO_NAME[int(i)] for ep in episodes for i in ep[key])
         lines += ["", f"### {title}", "", "| sub-goal | frames | share |", "|---|---|---|"]
-        for name, count in sorted(frames.items(), key=lambda kv: ID_TO_NAME.index(kv[0])):
+        for i, count in sorted(frames[key].items()):
+            name = ID_TO_NAME[i]
             lines.append(f"| {name} | {count} | {count / total:.3f} |")
     lines += ["", "The sub-goal vocabulary (ids → names) is `subgoal_vocabulary` in `meta/hnsdt.json`; per-episode "
               "metadata (behaviour, fail_prob, seed, outcome) is `meta/hnsdt_episodes.parquet`.", "",
@@ -75,11 +80,12 @@ def description(cfg, episodes: list[dict], layouts=None) -> str:
     return "\n".join(lines) + "\n"
 
 
-def card_arguments(cfg, episodes: list[dict], layouts=None) -> dict:
-    """``create_lerobot_dataset_card`` / ``push_to_hub`` arguments (kept in meta/hnsdt.json)."""
+def card_arguments(cfg, rows: list[dict], frames: dict[str, Counter], layouts=None) -> dict:
+    """``create_lerobot_dataset_card`` / ``push_to_hub`` arguments (kept in meta/hnsdt.json); ``rows``: the
+    episodes' ``meta`` rows, ``frames``: their :func:`coverage`."""
     env = cfg.env_id.split("/")[-1]
     return {"tags": ["hnsdt", "gridworld", "key-door", "neuro-symbolic", "decision-transformer", env],
-            "license": cfg.license, "dataset_description": description(cfg, episodes, layouts),
+            "license": cfg.license, "dataset_description": description(cfg, rows, frames, layouts),
             "paper": "Baheri and Alm, *Hierarchical Neuro-Symbolic Decision Transformer*, NeSy 2025",
             "citation_bibtex": BIBTEX}
 

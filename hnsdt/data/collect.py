@@ -17,6 +17,7 @@ files.
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -152,31 +153,92 @@ def collect_dataset(cfg: CollectConfig, root: str | Path, repo_id: str, progress
         "fps": cfg.fps, "seed": cfg.seed, "fail_probs": list(cfg.fail_probs),
         "behaviours": [vars(b) for b in cfg.behaviours], "executor": vars(cfg.executor), "render": cfg.render,
     }
-    from hnsdt.data.card import card_arguments
+    from hnsdt.data.card import card_arguments, coverage
     from hnsdt.data.lerobot_io import write_dataset  # lerobot takes seconds to import: only when writing
 
-    card = card_arguments(cfg, episodes)
+    card = card_arguments(cfg, [ep["meta"] for ep in episodes], coverage(episodes))
     return write_dataset(root, repo_id, cfg.layout, episodes, cfg.fps, meta, card, progress=progress,
                          render_px=cfg.render)
 
 
-def collect_on_layouts(cfg: CollectConfig, layouts: list[Layout], root: str | Path, repo_id: str, view_radius: int,
-                       family: str, progress: bool = True) -> Path:
-    """Collect ``cfg``'s behaviours on every layout of ``layouts`` (each its own batch seeds) and write one
-    dataset whose frames also store the local view of ``view_radius`` and their layout's index. ``cfg.layout`` is ignored: the layouts' list takes its place."""
-    from hnsdt.data.card import card_arguments
-    from hnsdt.data.lerobot_io import write_dataset
+SHARD_LAYOUTS = 1_000  # layouts per shard of a dataset over more: each shard is collected and written by a worker
+#                        process (its memory bounded by the shard, not the dataset), then LeRobot's aggregate joins
+#                        them; the bytes depend on this number, not on the workers (docs/timings.md, "Ten times the
+#                        data")
 
-    episodes = []
-    for i, layout in enumerate(tqdm(layouts, desc=f"collect {cfg.env_id}", unit="layout", disable=not progress)):
-        for ep in collect_episodes(replace(cfg, layout=layout, seed=_batch_seed(cfg.seed, 1_000_003, i)), False):
-            ep["layout_index"] = i
-            ep["meta"]["layout_index"] = i
-            episodes.append(ep)
+
+def collect_on_layouts(cfg: CollectConfig, layouts: list[Layout], root: str | Path, repo_id: str, view_radius: int,
+                       family: str, progress: bool = True, compute=None) -> Path:
+    """Collect ``cfg``'s behaviours on every layout of ``layouts`` (each its own batch seeds) and write one
+    dataset whose frames also store the local view of ``view_radius`` and their layout's index. ``cfg.layout`` is
+    ignored: the layouts' list takes its place. Over more than :data:`SHARD_LAYOUTS` layouts the collection runs
+    shard by shard on ``compute``'s workers (:mod:`hnsdt.core.compute`), each shard a LeRobot dataset, joined by
+    ``lerobot``'s own aggregation; the episodes are the same as in one piece."""
+    from hnsdt.data.card import card_arguments, coverage
+    from hnsdt.data import lerobot_io
+
     meta = {"repo_id": repo_id, "env_id": cfg.env_id, "family": family, "layout": layouts[0].name,
             "layouts": [lay.name for lay in layouts], "max_steps": cfg.max_steps, "fps": cfg.fps, "seed": cfg.seed,
             "fail_probs": list(cfg.fail_probs), "behaviours": [vars(b) for b in cfg.behaviours],
             "executor": vars(cfg.executor)}
-    card = card_arguments(replace(cfg, layout=layouts[0]), episodes, layouts)
-    return write_dataset(root, repo_id, layouts, episodes, cfg.fps, meta, card, progress=progress,
-                         view_radius=view_radius)
+    first = replace(cfg, layout=layouts[0])
+    if len(layouts) <= SHARD_LAYOUTS:
+        episodes = _collect_layouts(cfg, layouts, 0, progress)
+        card = card_arguments(first, [ep["meta"] for ep in episodes], coverage(episodes), layouts)
+        return lerobot_io.write_dataset(root, repo_id, layouts, episodes, cfg.fps, meta, card, progress=progress,
+                                        view_radius=view_radius)
+    from hnsdt.core.compute import Compute, run_tasks
+    from hnsdt.core.fileio import atomic_dir
+
+    root, side = Path(root), lerobot_io.map_side(layouts)
+    with atomic_dir(root) as staging:
+        shards = [Shard(cfg, layouts[i:i + SHARD_LAYOUTS], i, side, repo_id, view_radius,
+                        staging.parent / f"shard-{i // SHARD_LAYOUTS:05d}")
+                  for i in range(0, len(layouts), SHARD_LAYOUTS)]
+        parts = run_tasks(collect_shard, shards, compute or Compute(), desc=f"collect {cfg.env_id} by shards",
+                          progress=progress)
+        rows = [row for part_rows, _ in parts for row in part_rows]
+        frames = {key: sum((counts[key] for _, counts in parts), Counter()) for key in parts[0][1]}
+        info = lerobot_io.aggregate(staging, repo_id, [s.folder for s in shards], progress)
+        lerobot_io.finish_dataset(staging, repo_id, layouts, rows, meta, card_arguments(first, rows, frames, layouts),
+                                  info, view_radius)
+    return root
+
+
+def _collect_layouts(cfg: CollectConfig, layouts: list[Layout], first: int, progress: bool) -> list[dict]:
+    """The episodes on every layout of ``layouts``, the dataset's layouts ``first``, ``first + 1``, ...: each
+    seeded by, and its episodes naming, its index in the dataset."""
+    episodes = []
+    for i, layout in enumerate(tqdm(layouts, desc=f"collect {cfg.env_id}", unit="layout", disable=not progress),
+                               first):
+        for ep in collect_episodes(replace(cfg, layout=layout, seed=_batch_seed(cfg.seed, 1_000_003, i)), False):
+            ep["layout_index"] = i
+            ep["meta"]["layout_index"] = i
+            episodes.append(ep)
+    return episodes
+
+
+@dataclass(frozen=True)
+class Shard:
+    """One worker's part of a dataset over many layouts: its ``layouts``, the dataset's from index ``first`` on,
+    written as a LeRobot dataset at ``folder``, the whole map drawn on the dataset's square ``side``."""
+
+    cfg: CollectConfig
+    layouts: list
+    first: int
+    side: int
+    repo_id: str
+    view_radius: int
+    folder: Path
+
+
+def collect_shard(shard: Shard) -> tuple[list[dict], dict]:
+    """Collect and write one :class:`Shard`; its episodes' ``meta`` rows, in order, and their sub-goal
+    :func:`~hnsdt.data.card.coverage`."""
+    from hnsdt.data import lerobot_io
+    from hnsdt.data.card import coverage
+
+    episodes = _collect_layouts(shard.cfg, shard.layouts, shard.first, False)
+    lerobot_io.write_frames(shard.folder, shard.repo_id, shard.layouts, episodes, shard.cfg.fps,
+                            view_radius=shard.view_radius, side=shard.side, first=shard.first)
+    return [ep["meta"] for ep in episodes], coverage(episodes)

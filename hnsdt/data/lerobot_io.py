@@ -19,9 +19,9 @@ import json
 import logging
 import os
 import traceback
+import types
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 from tqdm import tqdm
 
@@ -92,28 +92,48 @@ def write_dataset(root: str | Path, repo_id: str, layout: Layout | list[Layout],
     place only when complete, so a failure leaves no half-written dataset. ``layout`` may be a list (episodes
     then name theirs by ``layout_index``) with ``view_radius`` > 0: each frame also stores its local view and the
     whole map."""
-    from hnsdt.symbolic.subgoals import ID_TO_NAME
-
     root = Path(root)
     layouts = list(layout) if isinstance(layout, (list, tuple)) else [layout]
     if len(layouts) > 1 and not view_radius:
         raise ValueError("a dataset over several layouts stores views: view_radius must be > 0")
+    with atomic_dir(root) as staging:
+        info = write_frames(staging, repo_id, layouts, episodes, fps, progress, render_px, view_radius,
+                            desc=f"write {root.name}")
+        finish_dataset(staging, repo_id, layouts, [ep["meta"] for ep in episodes], meta, card, info, view_radius)
+    return root
+
+
+def map_side(layouts: list[Layout]) -> int:
+    """The side of the square every frame's whole map is drawn on: the largest layout's longer side."""
+    return max(max(lay.shape) for lay in layouts)
+
+
+def write_frames(folder: Path, repo_id: str, layouts: list[Layout], episodes: list[dict], fps: int,
+                 progress: bool = False, render_px: int = 0, view_radius: int = 0, side: int | None = None,
+                 desc: str = "write", first: int = 0) -> dict:
+    """LeRobot's part of a dataset at ``folder`` (which must not exist): its frames, episodes metadata, tasks and
+    stats, written by ``lerobot``; returns its ``meta.info``. A shard of a dataset passes the whole dataset's
+    map square ``side`` (default: the largest of ``layouts``) and the dataset's index of its first layout,
+    ``first`` (its episodes name theirs by the dataset's index)."""
+    from hnsdt.symbolic.subgoals import ID_TO_NAME
+
     layout = layouts[0]  # the state's names (every layout of a dataset has the same flags)
-    side = max(max(lay.shape) for lay in layouts) if view_radius else 0  # the whole map's square
+    side = (side or map_side(layouts)) if view_radius else 0
     features = dataset_features(layout, render_px, view_radius, side)
     draw = (lambda state: render_rgb(layout, state, render_px)) if render_px else None
     view = (lambda ep: {
-        "views": local_view(layouts[ep["layout_index"]], ep["states"], view_radius).reshape(len(ep["states"]), -1),
-        "maps": whole_map(layouts[ep["layout_index"]], ep["states"], side).reshape(len(ep["states"]), -1),
+        "views": local_view(layouts[ep["layout_index"] - first], ep["states"], view_radius).reshape(
+            len(ep["states"]), -1),
+        "maps": whole_map(layouts[ep["layout_index"] - first], ep["states"], side).reshape(len(ep["states"]), -1),
     }) if view_radius else None
-    with atomic_dir(root) as staging, _quiet_video_encoder():
-        ds = LeRobotDataset.create(repo_id, fps=fps, features=features, root=staging, use_videos=bool(render_px))
+    with _quiet_video_encoder():
+        ds = LeRobotDataset.create(repo_id, fps=fps, features=features, root=folder, use_videos=bool(render_px))
         try:
             # Register the tasks in vocabulary order first, so task_index is the same on every run.
             used = sorted({int(i) for ep in episodes for i in ep["subgoal_ids"]})
             ds.meta.save_episode_tasks([ID_TO_NAME[i] for i in used])
             with _skip_image_embedding(features), _skip_fingerprints():
-                for ep in tqdm(episodes, desc=f"write {root.name}", unit="episode", disable=not progress):
+                for ep in tqdm(episodes, desc=desc, unit="episode", disable=not progress):
                     _add_episode(ds, ep, features, draw, view)
                     ds.save_episode()
             ds.finalize()
@@ -124,18 +144,51 @@ def write_dataset(root: str | Path, repo_id: str, layout: Layout | list[Layout],
             ds = None  # while the staging folder is still there to be removed, not after (it came back) and
             gc.collect()  # with their files still open (a tmpfs would not give the space back)
             raise
-        info = ds.meta.info
-        del ds
-        rows = [dict(ep["meta"], episode_index=i) for i, ep in enumerate(episodes)]
-        pd.DataFrame(rows).to_parquet(staging / EPISODES_TABLE, index=False)
-        md5 = data_md5(staging)
-        texts = ({"layout_texts": [lay.text for lay in layouts], "view_radius": view_radius, "map_side": side}
-                 if view_radius else {})
-        full_meta = dict(meta, format_version=FORMAT_VERSION, subgoal_vocabulary=ID_TO_NAME,
-                         layout_text=layout.text, state_names=layout.state_names, card=card, data_md5=md5, **texts)
-        (staging / HNSDT_META).write_text(json.dumps(full_meta, indent=2, sort_keys=True) + "\n")
-        (staging / "README.md").write_text(render_card(card, info, repo_id, md5))
-    return root
+        return ds.meta.info
+
+
+def finish_dataset(folder: Path, repo_id: str, layouts: list[Layout], rows: list[dict], meta: dict, card: dict,
+                   info: dict, view_radius: int = 0) -> None:
+    """Our files beside LeRobot's at ``folder``: the episode table (``rows``, one per episode in order), the
+    data files' md5, ``meta/hnsdt.json`` and the card."""
+    from hnsdt.symbolic.subgoals import ID_TO_NAME
+
+    pd.DataFrame([dict(row, episode_index=i) for i, row in enumerate(rows)]).to_parquet(folder / EPISODES_TABLE,
+                                                                                       index=False)
+    md5 = data_md5(folder)
+    texts = ({"layout_texts": [lay.text for lay in layouts], "view_radius": view_radius,
+              "map_side": map_side(layouts)} if view_radius else {})
+    full_meta = dict(meta, format_version=FORMAT_VERSION, subgoal_vocabulary=ID_TO_NAME,
+                     layout_text=layouts[0].text, state_names=layouts[0].state_names, card=card, data_md5=md5,
+                     **texts)
+    (folder / HNSDT_META).write_text(json.dumps(full_meta, indent=2, sort_keys=True) + "\n")
+    (folder / "README.md").write_text(render_card(card, info, repo_id, md5))
+
+
+def aggregate(folder: Path, repo_id: str, parts: list[Path], progress: bool = False) -> dict:
+    """LeRobot's part of a dataset at ``folder`` (which must not exist) joined from the datasets ``parts``, in
+    order, by ``lerobot``'s own aggregation (episode, frame and task indices renumbered, stats merged); returns
+    its ``meta.info``."""
+    from lerobot.datasets.aggregate import aggregate_datasets
+    from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+
+    with _quiet_tqdm(not progress):
+        aggregate_datasets([repo_id] * len(parts), repo_id, roots=list(parts), aggr_root=folder)
+    return LeRobotDatasetMetadata(repo_id, root=folder).info
+
+
+@contextlib.contextmanager
+def _quiet_tqdm(quiet: bool):
+    """lerobot's aggregation draws its own progress bar; hidden when ours are."""
+    from lerobot.datasets import aggregate as _aggregate
+
+    original = _aggregate.tqdm  # (the module `tqdm` as lerobot's aggregate names it)
+    if quiet:
+        _aggregate.tqdm = types.SimpleNamespace(tqdm=lambda iterable, *args, **kwargs: iterable)
+    try:
+        yield
+    finally:
+        _aggregate.tqdm = original
 
 
 @contextlib.contextmanager

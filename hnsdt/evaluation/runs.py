@@ -130,15 +130,17 @@ class Evaluation:
 
 def evaluate(evaluation: Evaluation, out: str | Path, compute=None, progress: bool = True):
     """Every task of ``evaluation`` on ``compute``'s executor, its tables written into ``out``, which is whole or
-    absent (built in a temporary folder and moved into place); the episode table."""
+    absent (built in a temporary folder and moved into place); the episode table. Cells finished by a run that
+    was killed are taken from what it kept (:func:`hnsdt.core.fileio.finished_tasks`)."""
     from hnsdt.core.compute import Compute, run_tasks
-    from hnsdt.core.fileio import atomic_dir
+    from hnsdt.core.fileio import atomic_dir, finished_tasks
 
-    results = run_tasks(evaluate_run, evaluation.tasks, compute or Compute(), desc=evaluation.desc,
-                        progress=progress)
-    with atomic_dir(Path(out)) as tmp:
-        tmp.mkdir()
-        return evaluation.write(tmp, results)
+    with finished_tasks(out) as keep:  # (cells finished before a kill are not run again)
+        results = run_tasks(evaluate_run, evaluation.tasks, compute or Compute(), desc=evaluation.desc,
+                            progress=progress, keep=keep)
+        with atomic_dir(Path(out)) as tmp:
+            tmp.mkdir()
+            return evaluation.write(tmp, results)
 
 
 def rerun(task: EvalTask, threads: int) -> tuple[dict, dict]:

@@ -17,7 +17,7 @@ from foxglove.messages import Log, LogLevel, RawImage, Timestamp
 
 from hnsdt.envs.keydoor import ACTION_NAMES
 from hnsdt.envs.render import CELL_PX, COLOURS, render_rgb
-from hnsdt.core.fileio import atomic_file
+from hnsdt.core.fileio import atomic_file, write_files
 from hnsdt.logs.record import PATH_COLOUR, PATH_WIDTH, EpisodeRecord
 from hnsdt.symbolic.subgoals import ID_TO_NAME
 
@@ -72,10 +72,8 @@ def draw_path(img: np.ndarray, path: np.ndarray) -> np.ndarray:
 
 
 def write_mcap(path: str | Path, rec: EpisodeRecord) -> Path:
-    path = Path(path)  # atomic_file creates the parent folder
-    data = mcap_bytes(rec)
-    with atomic_file(path) as tmp:
-        tmp.write_bytes(data)
+    path = Path(path)
+    write_files({path: mcap_bytes(rec)})
     return path
 
 

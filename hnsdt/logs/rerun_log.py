@@ -13,7 +13,7 @@ import rerun.blueprint as rrb
 
 from hnsdt.envs.keydoor import ACTION_NAMES
 from hnsdt.envs.render import CELL_PX, CLASS_ID, CLASSES, COLOURS, cell_classes
-from hnsdt.core.fileio import atomic_file
+from hnsdt.core.fileio import write_files
 from hnsdt.logs.record import PATH_COLOUR, PATH_WIDTH, EpisodeRecord
 from hnsdt.symbolic.subgoals import ID_TO_NAME
 
@@ -63,10 +63,8 @@ def _plan_markdown(rec: EpisodeRecord) -> str:
 
 
 def write_rrd(path: str | Path, rec: EpisodeRecord, episode_index: int = 0) -> Path:
-    path = Path(path)  # atomic_file creates the parent folder
-    data = rrd_bytes(rec, episode_index)
-    with atomic_file(path) as tmp:
-        tmp.write_bytes(data)
+    path = Path(path)
+    write_files({path: rrd_bytes(rec, episode_index)})
     return path
 
 
