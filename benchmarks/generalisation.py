@@ -244,7 +244,7 @@ def relabelled_run(params, run, models: Path, episodes: int):
     print(f"relabelled {run.method} seed {run.seed}: {frames.episode.max() + 1} episodes, {len(frames)} frames",
           flush=True)
     behaviours = tuple(run.train_cfg.behaviours) + (RELABELLED,)
-    return replace(run, data=join_frames(run.data, frames), train_cfg=replace(run.train_cfg, behaviours=behaviours))
+    return replace(run, data=join_frames(run.frames(), frames), train_cfg=replace(run.train_cfg, behaviours=behaviours))
 
 
 if __name__ == "__main__":

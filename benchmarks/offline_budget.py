@@ -46,7 +46,7 @@ def run(task):
 
     params = load_params(params_path, overrides)
     (task,) = plan_runs(params, env, method, [seed], Path(f"data/datasets/{env}"))
-    model_cfg, cfg, frames, facts = task.model_cfg, task.train_cfg, task.data, task.facts
+    model_cfg, cfg, frames, facts = task.model_cfg, task.train_cfg, task.frames(), task.facts
     snaps = {}
     if validated:  # the params' own budget: stopped by its validation measure (train.validation > 0)
         from hnsdt.models.train import train_decision_transformer

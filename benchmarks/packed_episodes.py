@@ -63,7 +63,7 @@ def main() -> None:
             if task.model_cfg.formulation != "episode":
                 print(f"{env:<13} {method:<12} (window formulation: nothing padded to pack)")
                 continue
-            objective = objective_for(task.data, task.model_cfg, task.train_cfg)
+            objective = objective_for(task.frames(), task.model_cfg, task.train_cfg)
             order = np.random.default_rng(0).permutation(objective.examples)
             rows = objective.batches(order, task.train_cfg.batch_size)
             batches = [to_device(objective.batch(r), torch.device("cpu")) for r in rows[:args.batches]]

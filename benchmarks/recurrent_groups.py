@@ -60,11 +60,11 @@ def main() -> None:
                 task = plan_unseen(params, method, Path("generalisation/dataset"))[0]
             else:
                 task = training.plan_runs(params, env, method, [0], Path("data/datasets") / env)[0]
-            starts, lengths = training_episodes(task.data, task.train_cfg.behaviours)
+            starts, lengths = training_episodes(task.frames(), task.train_cfg.behaviours)
             order = np.random.default_rng(0).permutation(len(starts))
             size = task.train_cfg.batch_size
             rows = [order[b:b + size] for b in range(0, len(order), size)][:args.batches]
-            batches = [to_device(episode_batch(task.data, starts[r], lengths[r]), torch.device("cpu")) for r in rows]
+            batches = [to_device(episode_batch(task.frames(), starts[r], lengths[r]), torch.device("cpu")) for r in rows]
             padded_steps = sum(b["mask"].numel() for b in batches) / sum(int(b["mask"].sum()) for b in batches)
             torch.manual_seed(0)
             model = network_for(method, task.model_cfg)(task.model_cfg).train()

@@ -598,6 +598,29 @@ def test_a_dataset_collected_in_shards_holds_the_frames_of_one_written_whole(tmp
     assert not list(tmp_path.glob("**/shard-*"))  # (the shards are gone with the staging folder)
 
 
+def test_a_training_task_carries_its_dataset_by_reference(tmp_path):
+    """An offline training task carries its dataset's frames by reference (path, labelling and the data files'
+    md5: a few hundred bytes, not the frames), which gives the frames `load_frames` reads; a dataset whose data
+    changed after the stage planned its tasks is refused, not trained on. Fails when the frames go into the task
+    (its pickle grows with the data)."""
+    import json
+    import pickle
+
+    from hnsdt.data.format import DatasetError
+    from hnsdt.data.frames import DatasetFrames, load_frames
+
+    params = validate(_tiny_generalisation_params(tmp_path))
+    root = collect_unseen(params, tmp_path / "ds", progress=False)
+    (run,) = plan_unseen(params, "hnsdt", root)
+    assert isinstance(run.data, DatasetFrames) and len(pickle.dumps(run.data)) < 1000
+    frames, read = pickle.loads(pickle.dumps(run)).frames(), load_frames(root, run.data.operators)
+    assert len(frames) > 100 and (frames.states == read.states).all() and (frames.actions == read.actions).all()
+    meta = json.loads((root / "meta/hnsdt.json").read_text())
+    (root / "meta/hnsdt.json").write_text(json.dumps(dict(meta, data_md5="0" * 32)))
+    with pytest.raises(DatasetError, match="changed since the stage read it"):
+        DatasetFrames(str(root), run.data.operators, False, meta["data_md5"] + " ").load()
+
+
 def test_frame_columns_read_a_few_row_groups_at_a_time_give_the_whole_files_columns(tmp_path, monkeypatch):
     """The data files are read a few row groups (episodes) at a time into arrays of the final size: the same
     columns as a read of the whole table. Fails when a batch lands at the wrong rows."""
@@ -765,7 +788,7 @@ def test_the_papers_arm_learns_from_random_walks_on_views_with_its_move_operator
     g["budgets"] = {"hnsdt_paper": {"max_steps": 0}}  # (the tiny params' 3 steps lifted: to its validated plateau)
     dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False)
     (run,) = plan_unseen(validate(params), "hnsdt_paper", dataset)
-    frames = run.data
+    frames = run.frames()
     walks = frames.policy == "random"
     assert walks.sum() > 0 and (~walks).sum() > 0
     assert NAME_TO_ID["Move"] in set(frames.subgoals[walks].tolist())  # the paper's labels, not GoTo
@@ -803,7 +826,7 @@ def test_our_arm_plans_over_the_experiments_operators_and_learns_their_labels(tm
         g["operators"] = operators
         for method in ("hnsdt", "lstm_hier"):
             (run,) = plan_unseen(validate(params), method, dataset)
-            labels[operators, method] = set(run.data.subgoals.tolist())
+            labels[operators, method] = set(run.frames().subgoals.tolist())
     goto = {i for name, i in NAME_TO_ID.items() if name.startswith("GoTo")}
     for method in ("hnsdt", "lstm_hier"):
         assert NAME_TO_ID["Move"] in labels["move", method] and not goto & labels["move", method]

@@ -32,23 +32,29 @@ class TrainTask:
     seed: int
     model_cfg: Any  # the network's config
     train_cfg: Any  # the trainer's config
-    data: Any  # offline: the dataset's frames; online: (layout or layouts, max_steps)
+    data: Any  # offline: the dataset's frames, by reference (DatasetFrames) or as Frames; online: (layout or
+    #            layouts, max_steps)
     facts: dict  # what goes into the checkpoint besides the configs
     progress: bool = False  # a progress bar (when it runs in the stage's process)
     split: bool = False  # hand back the state part-way (dataset learners sharing workers; :func:`pause_at`)
     state: Any = None  # where a split run continues from
     measure: Any = None  # the validation measure when not the held-out loss (:class:`StepsToExit`)
 
+    def frames(self):
+        """An offline task's frames (read from its dataset in this process when it carries them by reference)."""
+        return self.data.load() if hasattr(self.data, "load") else self.data
+
 
 def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: Path) -> list[TrainTask]:
     """One task per seed, on ``envs.<env>`` and its dataset (offline methods) or environment (online ones)."""
     training = METHODS[method].training
-    frames = None
+    frames = source = None
     if training == "dataset":
-        from hnsdt.data.frames import load_frames
+        from hnsdt.data.frames import DatasetFrames
 
-        # read once, shipped to every seed's task, with the sub-goal labels of the method's operators
-        frames = load_frames(dataset, method_executor(params, method).operators)
+        # with the sub-goal labels of the method's operators; the tasks carry the reference, each worker reads it
+        source = DatasetFrames.of(dataset, method_executor(params, method).operators)
+        frames = source.load()
     runs = []
     if METHODS[method].stage == "train":  # a decision transformer: knobs under `train` and `models`
         ts = train_settings(params)
@@ -69,7 +75,7 @@ def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: 
             held_out = validation_episodes(frames, cfg.validation) & used
             measure = StepsToExit.from_held_out(frames, held_out, n_starts, method, env_spec(params, env),
                                                 method_executor(params, method), facts)
-        return [TrainTask(method, seed, model_cfg, ts.method_config(method, seed), frames, facts, measure=measure)
+        return [TrainTask(method, seed, model_cfg, ts.method_config(method, seed), source, facts, measure=measure)
                 for seed in seeds]
     kind = "offline" if training == "dataset" else "online"  # a baseline: knobs under `baselines.<method>`
     listed = getattr(params.baselines, kind)
@@ -78,7 +84,7 @@ def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: 
     for seed in seeds:
         bs = baseline_settings(params, method, env, seed)
         if kind == "offline":
-            data, facts = frames, {"dataset": str(dataset)}
+            data, facts = source, {"dataset": str(dataset)}
         else:
             data, facts = (bs.env.layout, bs.env.max_steps), {}
         if getattr(bs.train, "patience", 0):
@@ -163,7 +169,7 @@ def train_run(task: TrainTask | SeedStack):
         results = [_trained(run, *result) for run, result in zip(runs, out)]
         return results if isinstance(task, SeedStack) else results[0]
     extra = {"measure": task.measure} if task.measure is not None else {}  # (DTs; offline baselines with patience)
-    out = trainer(task.data, task.model_cfg, task.train_cfg, progress=task.progress,
+    out = trainer(task.frames(), task.model_cfg, task.train_cfg, progress=task.progress,
                   desc=f"{task.method} seed {task.seed}", network=network, state=task.state,
                   stop_after=pause_at(task), **extra)
     if not isinstance(out, tuple):  # paused part-way
@@ -187,6 +193,8 @@ def train_all(runs: list[TrainTask], env: str, out: Path, curves: Path, compute,
     tasks = [replace(r, progress=progress and inline) for r in runs]
     # seeds paused part-way where they share workers (in one process a pause would only cost a model rebuild)
     tasks = seed_stacks(tasks, compute) if online else [replace(t, split=not inline) for t in tasks]
+    if compute.executor == "ray" and not online:  # the frames themselves, through Ray's object store: a cluster's
+        tasks = [replace(t, data=t.frames()) for t in tasks]  # nodes need no copy of the dataset
     with finished_tasks(out) as keep:  # (a seed finished before a kill is not trained again)
         results = run_tasks(train_run, tasks, compute, desc=f"train {env} {method}",
                             progress=progress and not inline, keep=keep)
@@ -287,9 +295,9 @@ def _budget(params: Params, method: str, train_cfg):
 def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: list[Layout],
                      validation: Callable[[], list[Layout]]) -> list[TrainTask]:
     """One task per training seed of ``method`` (``generalisation.seeds_of``): its view network on the training
-    ``layouts`` (online methods) or on their ``dataset`` (offline ones); ``validation()`` gives the layouts a
-    budget measured by acting stops on (:class:`StepsToExit`)."""
-    from hnsdt.data.frames import load_frames
+    ``layouts`` (online methods) or on their ``dataset`` (offline ones, by reference: :class:`DatasetFrames`);
+    ``validation()`` gives the layouts a budget measured by acting stops on (:class:`StepsToExit`)."""
+    from hnsdt.data.frames import DatasetFrames
 
     g = params.need("generalisation")
     if method not in g.learned:
@@ -307,14 +315,15 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
             raise ValueError(f"dataset {dataset}: view radius {radius} (0 = no observation.view), but "
                              f"generalisation.view_radius is {g.view_radius}; collect it with "
                              "`python pipeline/generalisation.py collect`")
-        data = load_frames(dataset, layout_executor(params, method).operators,  # (Move: hindsight labels)
-                           whole_map=g.whole_map and lookup_method(method).stage == "train")
+        source = DatasetFrames.of(dataset, layout_executor(params, method).operators,  # (Move: hindsight labels)
+                                  whole_map=g.whole_map and lookup_method(method).stage == "train")
+        frames = source.load()
         facts = {"dataset": str(dataset), "family": g.family,
-                 "target_return": float(data.returns_to_go[np.unique(data.episode_start)].max())}
+                 "target_return": float(frames.returns_to_go[np.unique(frames.episode_start)].max())}
     seeds = g.seeds_of(method)
     net_cfg, train_cfg = layout_network_configs(params, method, seeds[0], layouts[0])
     wanted = list(getattr(train_cfg, "behaviours", ()))
-    if not online and wanted and not np.isin(data.policy, wanted).any():
+    if not online and wanted and not np.isin(frames.policy, wanted).any():
         raise ValueError(f"{method} learns from {wanted} episodes and {dataset} holds none; set "
                          "generalisation.random_episodes_per_layout > 0 (random walks) and collect again")
     measure = None
@@ -325,5 +334,5 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
     elif lookup_method(method).stage != "train" and getattr(train_cfg, "patience", 0):  # (a DT's: train.validation)
         raise params.error(f"generalisation.budgets.{method}.patience stops on the validation layouts: set "
                            "generalisation.validation_layouts > 0")
-    return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data, facts, measure=measure)
-            for seed in seeds]
+    return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data if online else source, facts,
+                      measure=measure) for seed in seeds]

@@ -1,9 +1,12 @@
 """A collected LeRobot dataset's frames, read once (the Arrow table stock ``LeRobotDataset`` loads, as numpy:
 :func:`hnsdt.data.format.frame_columns`) into the :class:`~hnsdt.models.windows.Frames` the offline learners
-train on."""
+train on; :class:`DatasetFrames`, the same frames by reference, is what a training task carries."""
 
 from __future__ import annotations
 
+import json
+from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -35,3 +38,41 @@ def load_frames(root: str | Path, operators: str = "goto", whole_map: bool = Fal
     return frames_from_arrays(states, cols["action"], cols["next.reward"], cols[column], cols[f"{column}.target"],
                               cols["episode_index"], cols["frame_index"],
                               policies.loc[cols["episode_index"]].to_numpy())
+
+
+@dataclass(frozen=True)
+class DatasetFrames:
+    """A dataset's frames by reference (:func:`load_frames`' arguments and the data files' md5): what a training
+    task carries instead of the frames, so that each process reads them from the dataset once (:meth:`load`)
+    and no task is pickled with them — a stage of five seeds on two workers at 40,000 maps would otherwise hold
+    a copy of its frames per task in flight. Its md5 names the bytes: a dataset changed since (or damaged) is
+    refused when read. (On Ray the stage hands its tasks the frames themselves, through Ray's object store: a
+    cluster's nodes need no copy of the dataset.)"""
+
+    root: str
+    operators: str = "goto"
+    whole_map: bool = False
+    data_md5: str = ""
+
+    @classmethod
+    def of(cls, root: str | Path, operators: str = "goto", whole_map: bool = False) -> "DatasetFrames":
+        from hnsdt.data.format import HNSDT_META, check_dataset
+
+        check_dataset(root)
+        md5 = json.loads((Path(root) / HNSDT_META).read_text()).get("data_md5", "")
+        return cls(str(root), operators, whole_map, md5)
+
+    def load(self) -> Frames:
+        """The frames (read once per process: the last dataset read is kept)."""
+        return _read(self)
+
+
+@lru_cache(maxsize=1)
+def _read(ref: DatasetFrames) -> Frames:
+    from hnsdt.data.format import HNSDT_META, DatasetError
+
+    md5 = json.loads((Path(ref.root) / HNSDT_META).read_text()).get("data_md5", "")
+    if md5 != ref.data_md5:
+        raise DatasetError(f"dataset {ref.root}: changed since the stage read it (data md5 {md5}, was "
+                           f"{ref.data_md5}); run the stage again")
+    return load_frames(ref.root, ref.operators, ref.whole_map)

@@ -168,12 +168,15 @@ def finish_dataset(folder: Path, repo_id: str, layouts: list[Layout], rows: list
 def aggregate(folder: Path, repo_id: str, parts: list[Path], progress: bool = False) -> dict:
     """LeRobot's part of a dataset at ``folder`` (which must not exist) joined from the datasets ``parts``, in
     order, by ``lerobot``'s own aggregation (episode, frame and task indices renumbered, stats merged); returns
-    its ``meta.info``."""
+    its ``meta.info``. Each part's data file stays a file of its own: packed, LeRobot reads the growing
+    destination file back for every part (one row group per episode), which at 40 parts of 1,000 maps took
+    more than 4 GiB and time quadratic in the parts (measured; docs/timings.md)."""
     from lerobot.datasets.aggregate import aggregate_datasets
     from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
 
     with _quiet_tqdm(not progress):
-        aggregate_datasets([repo_id] * len(parts), repo_id, roots=list(parts), aggr_root=folder)
+        aggregate_datasets([repo_id] * len(parts), repo_id, roots=list(parts), aggr_root=folder,
+                           concatenate_data=False)
     return LeRobotDatasetMetadata(repo_id, root=folder).info
 
 
