@@ -4,7 +4,8 @@ For each number of maps: `hnsdt generalisation collect` and `hnsdt generalisatio
 seed) run as fresh processes on params.yaml with `generalisation.train_layouts` set, under `/usr/bin/time -v`
 (its "Maximum resident set size": the largest single process) while a sampler adds up the resident memory of
 the command's whole process tree every 0.2 s (workers included). Prints one row per number of maps and stage:
-frames, seconds, seconds per map, peak RSS of one process and of the tree. The issue's scale study runs
+frames, seconds, seconds per 1,000 maps, CPU-seconds (user + system, every process: the figure to compare when
+other work shares the cores), peak RSS of one process and of the tree. The issue's scale study runs
 `--maps 400 4000 40000` with `--set episodes_per_layout=1` (2 episodes a map, as the scaling figure's 4,000-map
 point); the figure is in docs/timings.md.
 
@@ -66,7 +67,8 @@ def measured(cmd: list[str], log: Path) -> dict:
     if rc:
         sys.exit(f"{' '.join(cmd)} failed ({rc}):\n" + "\n".join(text.splitlines()[-20:]))
     largest = int(re.search(r"Maximum resident set size \(kbytes\): (\d+)", text).group(1)) * 1024
-    return {"seconds": seconds, "rss": largest, "tree_rss": peak}
+    cpu = sum(float(re.search(rf"{kind} time \(seconds\): ([\d.]+)", text).group(1)) for kind in ("User", "System"))
+    return {"seconds": seconds, "cpu": cpu, "rss": largest, "tree_rss": peak}
 
 
 def main() -> None:
@@ -84,8 +86,9 @@ def main() -> None:
     hnsdt = str(Path(sys.executable).with_name("hnsdt"))
     gib = 2 ** 30
     print(f"CPU: {cpu_name()}; params {args.params} with {args.set or 'no changes'}; HNSDT seed {args.seed}\n")
-    print("| maps | stage | frames | seconds | s / 1,000 maps | peak RSS, largest process | peak RSS, all processes |")
-    print("|---|---|---|---|---|---|---|")
+    print("| maps | stage | frames | seconds | s / 1,000 maps | CPU-s | peak RSS, largest process | peak RSS, all "
+          "processes |")
+    print("|---|---|---|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as tmp:
         for n in args.maps:
             folder = (args.keep / f"maps{n}") if args.keep else Path(tmp) / f"maps{n}"
@@ -118,7 +121,7 @@ def main() -> None:
                     usage = usage.get("facts", usage).get("usage", {})
                     extra = f" ({usage.get('epochs', '?')} epochs, {usage.get('gradient_steps', '?')} steps)"
                 print(f"| {n:,} | {stage}{extra} | {frames:,} | {m['seconds']:.0f} | {1000 * m['seconds'] / n:.0f} | "
-                      f"{m['rss'] / gib:.2f} GiB | {m['tree_rss'] / gib:.2f} GiB |", flush=True)
+                      f"{m['cpu']:.0f} | {m['rss'] / gib:.2f} GiB | {m['tree_rss'] / gib:.2f} GiB |", flush=True)
 
 
 def field(name: str) -> str:
