@@ -46,6 +46,14 @@ def _recovered(returncode: int, said: str, repo) -> bool:
     return True
 
 
+def _obsolete_kept(path) -> bool:
+    """A killed stage's kept results (hnsdt.core.fileio.finished_tasks) beside an output that is complete: DVC
+    restored that stage from its run cache instead of running it, so nothing of ours ran to remove them (they are
+    ignored by git and DVC, and documented: docs/reproducibility.md)."""
+    name = path.name[len(TMP_PREFIX):]
+    return name.endswith("-finished") and (path.parent / name[:-len("-finished")]).exists()
+
+
 def test_twenty_kills_anywhere_end_in_the_uninterrupted_run_s_bytes(tmp_path, first_run):
     """Each run is killed once it has started its first or second stage (at random) and a random 0–3 s more:
     inside a stage's imports, training or writing, or in DVC's bookkeeping between stages. A run that finishes
@@ -84,7 +92,8 @@ def test_twenty_kills_anywhere_end_in_the_uninterrupted_run_s_bytes(tmp_path, fi
     if _recovered(last.returncode, last.stdout + last.stderr, repo):
         recovered += 1
         run(["dvc", "repro"], repo)
-    assert not list(repo.rglob(f"{TMP_PREFIX}*")), "temporaries of killed writes were not cleaned up"
+    assert not [p for p in repo.rglob(f"{TMP_PREFIX}*") if not _obsolete_kept(p)], \
+        "temporaries of killed writes were not cleaned up"
     outs, reference = lock_outs(repo), first_run[1]
     assert outs.keys() == reference.keys()
     assert {k for k in outs if outs[k] != reference[k]} <= {"evaluate:recordings"}, killed_in
