@@ -11,13 +11,13 @@ as a new task — which goes to the back of the queue: a training seed hands bac
 * ``local`` (default): a pool of ``workers`` spawned processes (0 = one per core / threads); one worker runs
   the tasks in this process, each task and result through the same plain pickles as a pool's (so a task that
   would not cross to a worker fails here too).
-A stage that passes ``keep`` (:func:`hnsdt.core.fileio.finished_tasks`: a hidden folder beside its output) has
-each finished task's result kept there until its output is written: killed and started again, it computes only
-the tasks that had not finished (training seeds, evaluation cells), with the same bytes.
-
 * ``ray``: one Ray task per run, ``num_cpus = threads``. Connects to ``RAY_ADDRESS`` when it is set (a
   cluster whose nodes have this package installed at the same revision), otherwise starts a local Ray
   instance. The pinned CPU settings travel in the tasks' runtime environment.
+
+A stage that passes ``keep`` (:func:`hnsdt.core.fileio.finished_tasks`: a hidden folder beside its output) has
+each finished task's result kept there until its output is written: killed and started again, it computes only
+the tasks that had not finished (training seeds, evaluation cells), with the same bytes.
 """
 
 from __future__ import annotations
@@ -84,8 +84,9 @@ def run_tasks(fn: Callable, tasks: list, compute: Compute = Compute(), desc: str
     from tqdm import tqdm
 
     kept = Kept(keep, fn) if keep is not None else None
-    out = [kept.result(task) if kept else None for task in tasks]
-    todo = [i for i, result in enumerate(out) if result is None]
+    paths = [kept.path(task) for task in tasks] if kept else [None] * len(tasks)  # (each task pickled once here)
+    out = [kept.result(path) if kept else _MISSING for path in paths]
+    todo = [i for i, result in enumerate(out) if result is _MISSING]
     if len(todo) < len(tasks):
         print(f"{desc}: {len(tasks) - len(todo)} of {len(tasks)} runs finished before this one was stopped; "
               f"taken from {keep}", flush=True)
@@ -93,19 +94,19 @@ def run_tasks(fn: Callable, tasks: list, compute: Compute = Compute(), desc: str
 
     def finished(i: int, result: Any) -> None:
         if kept:
-            kept.add(tasks[todo[i]], result)
+            kept.add(paths[todo[i]], result)
         out[todo[i]] = result
         bar.update(1)
 
     try:
         if todo:
             (_run_ray if compute.executor == "ray" else _run_local)(fn, [tasks[i] for i in todo], compute, finished)
-        return [None if result is _NONE else result for result in out]
+        return out
     finally:
         bar.close()
 
 
-_NONE = object()  # a kept result that is None
+_MISSING = object()  # no kept result (a kept result may itself be None)
 
 
 class Kept:
@@ -116,29 +117,28 @@ class Kept:
     def __init__(self, folder: Path, fn: Callable):
         self.folder, self.fn = Path(folder), f"{fn.__module__}.{fn.__qualname__}"
 
-    def _path(self, task: Any) -> Path:
+    def path(self, task: Any) -> Path:
+        """Where ``task``'s result is kept."""
         import hashlib
 
         digest = hashlib.sha256(f"{code_digest()}\0{self.fn}\0".encode() + _dumps(task)).hexdigest()[:32]
         return self.folder / f"{digest}.pkl"
 
-    def result(self, task: Any) -> Any:
-        """The kept result of ``task`` (``_NONE`` for a kept ``None``), or None when there is none."""
-        path = self._path(task)
-        if not path.is_file():
-            return None
+    @staticmethod
+    def result(path: Path) -> Any:
+        """The result kept at ``path``, or ``_MISSING`` when there is none (or a damaged one: computed again)."""
         try:
-            result = pickle.loads(path.read_bytes())
-        except Exception:  # noqa: BLE001  (a damaged pickle: computed again)
-            return None
-        return _NONE if result is None else result
+            return pickle.loads(path.read_bytes())
+        except Exception:  # noqa: BLE001  (none there, or damaged)
+            return _MISSING
 
-    def add(self, task: Any, result: Any) -> None:
-        """Keep ``result``; where it cannot be kept (a full disk) the run goes on without it."""
+    @staticmethod
+    def add(path: Path, result: Any) -> None:
+        """Keep ``result`` at ``path``; where it cannot be kept (a full disk) the run goes on without it."""
         from hnsdt.core.fileio import atomic_file
 
         try:
-            with atomic_file(self._path(task)) as tmp:
+            with atomic_file(path) as tmp:
                 tmp.write_bytes(_dumps(result))
         except OSError:
             pass

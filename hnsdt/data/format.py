@@ -56,23 +56,6 @@ def check_dataset(root: str | Path) -> dict:
     return meta
 
 
-def _damaged(root: Path, recorded: str) -> DatasetError:
-    return DatasetError(f"dataset {root}: its data files are damaged (their md5 is not the {recorded} recorded "
-                        f"when it was written): `dvc checkout {root}` restores the committed copy from DVC's cache; "
-                        "if that is damaged too, `dvc repro --force` the stage that collected it")
-
-
-def check_data_files(root: Path) -> None:
-    """The data files are the bytes the collector wrote: their md5 (``meta/hnsdt.json``'s ``data_md5``, which
-    the card cites) is checked before any frame is used, so a damaged file — truncated or one bit flipped, in the
-    workspace or in DVC's cache it came from — stops with what to run, never with a wrong number."""
-    from hnsdt.data.card import data_md5
-
-    recorded = json.loads((root / HNSDT_META).read_text()).get("data_md5")
-    if recorded is not None and data_md5(root) != recorded:
-        raise _damaged(root, recorded)
-
-
 def episode_table(root: str | Path) -> pd.DataFrame:
     """One row per episode (behaviour, fail_prob, seed, outcome, ...), in episode order."""
     check_dataset(root)
@@ -87,9 +70,11 @@ ROW_GROUPS_AT_ONCE = 256  # LeRobot writes one row group per episode; reading a 
 def frame_columns(root: str | Path, names: list[str]) -> dict[str, np.ndarray]:
     """The frame columns ``names`` of a dataset (checked by the caller: :func:`check_dataset`) as numpy, one row
     per frame in index order: a vector feature as (frames, size), a scalar one (stored as a 1-element vector or a
-    plain value) as (frames,). Each data file is read once, its md5 (:func:`check_data_files`) taken from the
-    same bytes, a few row groups at a time into arrays of the final size: memory is the columns' own and one
-    file's bytes, whatever the number of episodes."""
+    plain value) as (frames,). Each data file is read once, a few row groups at a time into arrays of the final
+    size (memory: the columns' own and one file's bytes, whatever the number of episodes), and its md5 is taken
+    from the same bytes: a damaged file — truncated or one bit flipped, in the workspace or in DVC's cache it
+    came from — against ``meta/hnsdt.json``'s ``data_md5`` (which the card cites) stops with what to run, never
+    with a wrong number."""
     import hashlib
 
     import pyarrow as pa
@@ -124,7 +109,9 @@ def frame_columns(root: str | Path, names: list[str]) -> dict[str, np.ndarray]:
         except (pa.ArrowException, OSError, ValueError) as e:
             failure = e
     if recorded is not None and md5.hexdigest() != recorded:
-        raise _damaged(root, recorded)
+        raise DatasetError(f"dataset {root}: its data files are damaged (their md5 is not the {recorded} recorded "
+                           f"when it was written): `dvc checkout {root}` restores the committed copy from DVC's "
+                           "cache; if that is damaged too, `dvc repro --force` the stage that collected it")
     if failure is not None:
         raise DatasetError(f"dataset {root}: cannot read its data files ({type(failure).__name__}: {failure})")
     if index is None or at != len(index) or not np.array_equal(index, np.arange(at)):

@@ -56,11 +56,9 @@ class DatasetFrames:
 
     @classmethod
     def of(cls, root: str | Path, operators: str = "goto", whole_map: bool = False) -> "DatasetFrames":
-        from hnsdt.data.format import HNSDT_META, check_dataset
+        from hnsdt.data.format import check_dataset
 
-        check_dataset(root)
-        md5 = json.loads((Path(root) / HNSDT_META).read_text()).get("data_md5", "")
-        return cls(str(root), operators, whole_map, md5)
+        return cls(str(root), operators, whole_map, check_dataset(root).get("data_md5", ""))
 
     def load(self) -> Frames:
         """The frames (read once per process: the last dataset read is kept)."""
