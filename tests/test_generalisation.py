@@ -545,10 +545,10 @@ def test_the_dataset_over_generated_layouts_stores_each_frames_view(tmp_path):
 
 
 def test_a_dataset_collected_in_shards_holds_the_frames_of_one_written_whole(tmp_path, monkeypatch):
-    """Over more than SHARD_LAYOUTS layouts each shard is collected and written by a worker and LeRobot's
-    aggregation joins them: every frame column, the episode table and the card (but its md5) are those of the
-    dataset written in one piece, stock LeRobotDataset loads it with each frame's task, and its bytes are the
-    same on one worker or two. Fails when a shard seeds its layouts by their index within the shard (tried: the
+    """Over more than SHARD_LAYOUTS layouts each shard is collected and written by a worker and they are joined
+    one at a time, each shard's data and episodes a file of its own: every frame column (task indices included),
+    the episode table and the card (but its md5) are those of the dataset written in one piece, stock
+    LeRobotDataset loads it with each frame's task, and its bytes are the same on one worker or two. Fails when a shard seeds its layouts by their index within the shard (tried: the
     states differ)."""
     import hashlib
     import json
@@ -584,7 +584,7 @@ def test_a_dataset_collected_in_shards_holds_the_frames_of_one_written_whole(tmp
             == json.loads((sharded[2] / "meta/stats.json").read_text()))
     names = ["observation.state", "observation.view", "observation.map", "layout_index", "action", "next.reward",
              "subgoal", "subgoal.target", "move_subgoal", "move_subgoal.target", "episode_index", "frame_index",
-             "timestamp"]
+             "timestamp", "task_index"]
     one, joined = frame_columns(whole, names), frame_columns(sharded[2], names)
     for name in names:
         assert np.array_equal(one[name], joined[name]), name
@@ -596,6 +596,10 @@ def test_a_dataset_collected_in_shards_holds_the_frames_of_one_written_whole(tmp
     assert len(a) == len(b) and b.meta.total_episodes == a.meta.total_episodes
     assert [a[i]["task"] for i in range(0, len(a), 7)] == [b[i]["task"] for i in range(0, len(b), 7)]
     assert not list(tmp_path.glob("**/shard-*"))  # (the shards are gone with the staging folder)
+    shards = len(json.loads((whole / "meta/hnsdt.json").read_text())["layouts"])
+    assert len(list(sharded[2].glob("data/*/*.parquet"))) == len(list(sharded[2].glob("meta/episodes/*/*.parquet")))
+    assert len(list(sharded[2].glob("data/*/*.parquet"))) == shards
+    assert b.meta.episodes["meta/episodes/file_index"][-1] == shards - 1  # (each episode names its own file)
 
 
 def test_a_training_task_carries_its_dataset_by_reference(tmp_path):

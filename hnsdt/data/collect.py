@@ -162,8 +162,8 @@ def collect_dataset(cfg: CollectConfig, root: str | Path, repo_id: str, progress
 
 
 SHARD_LAYOUTS = 1_000  # layouts per shard of a dataset over more: each shard is collected and written by a worker
-#                        process (its memory bounded by the shard, not the dataset), then LeRobot's aggregate joins
-#                        them; the bytes depend on this number, not on the workers (docs/timings.md, "Ten times the
+#                        process (its memory bounded by the shard, not the dataset), then they are joined one at a
+#                        time (hnsdt.data.lerobot_io.join); the bytes depend on this number, not on the workers (docs/timings.md, "Ten times the
 #                        data")
 
 
@@ -172,8 +172,8 @@ def collect_on_layouts(cfg: CollectConfig, layouts: list[Layout], root: str | Pa
     """Collect ``cfg``'s behaviours on every layout of ``layouts`` (each its own batch seeds) and write one
     dataset whose frames also store the local view of ``view_radius`` and their layout's index. ``cfg.layout`` is
     ignored: the layouts' list takes its place. Over more than :data:`SHARD_LAYOUTS` layouts the collection runs
-    shard by shard on ``compute``'s workers (:mod:`hnsdt.core.compute`), each shard a LeRobot dataset, joined by
-    ``lerobot``'s own aggregation; the episodes are the same as in one piece."""
+    shard by shard on ``compute``'s workers (:mod:`hnsdt.core.compute`), each shard a LeRobot dataset, joined one
+    at a time by :func:`~hnsdt.data.lerobot_io.join`; the frames are the same as in one piece."""
     from hnsdt.data.card import card_arguments, coverage
     from hnsdt.data import lerobot_io
 
@@ -199,7 +199,7 @@ def collect_on_layouts(cfg: CollectConfig, layouts: list[Layout], root: str | Pa
                           progress=progress)
         rows = [row for part_rows, _ in parts for row in part_rows]
         frames = {key: sum((counts[key] for _, counts in parts), Counter()) for key in parts[0][1]}
-        info = lerobot_io.aggregate(staging, repo_id, [s.folder for s in shards], progress)
+        info = lerobot_io.join(staging, repo_id, [s.folder for s in shards], progress)
         lerobot_io.finish_dataset(staging, repo_id, layouts, rows, meta, card_arguments(first, rows, frames, layouts),
                                   info, view_radius)
     return root

@@ -19,7 +19,6 @@ import json
 import logging
 import os
 import traceback
-import types
 from pathlib import Path
 
 import pandas as pd
@@ -165,33 +164,57 @@ def finish_dataset(folder: Path, repo_id: str, layouts: list[Layout], rows: list
     (folder / "README.md").write_text(render_card(card, info, repo_id, md5))
 
 
-def aggregate(folder: Path, repo_id: str, parts: list[Path], progress: bool = False) -> dict:
+def join(folder: Path, repo_id: str, parts: list[Path], progress: bool = False) -> dict:
     """LeRobot's part of a dataset at ``folder`` (which must not exist) joined from the datasets ``parts``, in
-    order, by ``lerobot``'s own aggregation (episode, frame and task indices renumbered, stats merged); returns
-    its ``meta.info``. Each part's data file stays a file of its own: packed, LeRobot reads the growing
-    destination file back for every part (one row group per episode), which at 40 parts of 1,000 maps took
-    more than 4 GiB and time quadratic in the parts (measured; docs/timings.md)."""
-    from lerobot.datasets.aggregate import aggregate_datasets
+    order, one part at a time; returns its ``meta.info``. Each part's data and episodes files are copied with
+    ``lerobot``'s own functions for its aggregation (episode, frame and task indices renumbered, the episodes'
+    stats shifted) and stay files of their own; the parts' stats are merged by ``lerobot``'s ``aggregate_stats``.
+    Tasks are numbered in sub-goal vocabulary order, as in a dataset written in one piece.
+
+    Not ``aggregate_datasets`` itself: it holds every part's episode metadata at once (each episode's stats
+    include the whole map's) and reads the growing episodes file back for every part, 4.84 GiB at 40 parts of
+    1,000 maps (measured; docs/timings.md, "Ten times the data")."""
+    from lerobot.datasets import aggregate as lerobot_aggregate
+    from lerobot.datasets.compute_stats import aggregate_stats
     from lerobot.datasets.dataset_metadata import LeRobotDatasetMetadata
+    from lerobot.datasets.io_utils import load_tasks, write_info, write_stats, write_tasks
+    from lerobot.datasets.utils import DEFAULT_CHUNK_SIZE, DEFAULT_DATA_FILE_SIZE_IN_MB, DEFAULT_EPISODES_PATH
 
-    with _quiet_tqdm(not progress):
-        aggregate_datasets([repo_id] * len(parts), repo_id, roots=list(parts), aggr_root=folder,
-                           concatenate_data=False)
-    return LeRobotDatasetMetadata(repo_id, root=folder).info
+    from hnsdt.symbolic.subgoals import NAME_TO_ID
 
-
-@contextlib.contextmanager
-def _quiet_tqdm(quiet: bool):
-    """lerobot's aggregation draws its own progress bar; hidden when ours are."""
-    from lerobot.datasets import aggregate as _aggregate
-
-    original = _aggregate.tqdm  # (the module `tqdm` as lerobot's aggregate names it)
-    if quiet:
-        _aggregate.tqdm = types.SimpleNamespace(tqdm=lambda iterable, *args, **kwargs: iterable)
-    try:
-        yield
-    finally:
-        _aggregate.tqdm = original
+    names = sorted({name for part in parts for name in load_tasks(part).index}, key=NAME_TO_ID.__getitem__)
+    data_at, episode_files, stats, dst = {"chunk": 0, "file": 0}, 0, [], None
+    for part in tqdm(parts, desc=f"join {folder.name}", unit="shard", disable=not progress):
+        src = LeRobotDatasetMetadata(repo_id, root=part)  # (its episodes: one part's, released each turn)
+        if dst is None:
+            dst = LeRobotDatasetMetadata.create(repo_id=repo_id, fps=src.fps, robot_type=src.robot_type,
+                                                features=src.features, root=folder, use_videos=False)
+            dst.tasks = pd.DataFrame({"task_index": range(len(names))}, index=pd.Index(names, name="task"))
+        elif src.features != dst.features:
+            raise DatasetError(f"{part}: its features are not those of {parts[0]}; it cannot join them")
+        data_at = lerobot_aggregate.aggregate_data(src, dst, data_at, DEFAULT_DATA_FILE_SIZE_IN_MB,
+                                                   DEFAULT_CHUNK_SIZE, concatenate_data=False)
+        for chunk, file in sorted(set(zip(src.episodes["meta/episodes/chunk_index"],
+                                          src.episodes["meta/episodes/file_index"]))):
+            rows = lerobot_aggregate.update_meta_data(
+                pd.read_parquet(part / DEFAULT_EPISODES_PATH.format(chunk_index=chunk, file_index=file)), dst,
+                {"chunk": 0, "file": 0}, data_at, {})
+            at = dict(zip(("chunk", "file"), divmod(episode_files, DEFAULT_CHUNK_SIZE)))  # (LeRobot's numbering)
+            rows["meta/episodes/chunk_index"], rows["meta/episodes/file_index"] = at["chunk"], at["file"]
+            path = folder / DEFAULT_EPISODES_PATH.format(chunk_index=at["chunk"], file_index=at["file"])
+            path.parent.mkdir(parents=True, exist_ok=True)
+            rows.to_parquet(path)
+            episode_files += 1
+        data_at.pop("src_to_dst", None)
+        dst.info.total_episodes += src.total_episodes
+        dst.info.total_frames += src.total_frames
+        stats.append(src.stats)
+    write_tasks(dst.tasks, folder)
+    dst.info.total_tasks = len(names)
+    dst.info.splits = {"train": f"0:{dst.info.total_episodes}"}
+    write_info(dst.info, folder)
+    write_stats(aggregate_stats(stats), folder)
+    return dst.info
 
 
 @contextlib.contextmanager
