@@ -35,7 +35,8 @@ test: $(STAMP)
 test-fast: $(STAMP)
 	PATH="$(BIN):$$PATH" python -m pytest -m "not slow and not learning and not soak"
 
-# The soak: the tiny pipeline SIGKILLed at 20 seeded random moments, resumed each time (minutes; CI runs it).
+# The soak: the tiny pipeline SIGKILLed at 20 seeded random moments, resumed each time, and run on a disk that
+# fills, then grows (minutes; CI runs it).
 soak: $(STAMP)
 	PATH="$(BIN):$$PATH" python -m pytest -m soak -n 0
 

@@ -109,3 +109,37 @@ def test_a_full_disk_ends_in_one_line_leaves_nothing_and_the_retry_writes_the_sa
         out = hnsdt(*args(roomy), cwd=work)
         assert out.returncode == 0, out.stderr[-2000:]
         assert _files(roomy) == _files(reference)
+
+
+def _used_kib(root: Path) -> int:
+    """What the files under ``root`` take on disk, in KiB."""
+    return sum(p.stat().st_blocks * 512 for p in root.rglob("*") if p.is_file() and not p.is_symlink()) // 1024
+
+
+@pytest.mark.soak
+def test_a_pipeline_that_fills_its_disk_finishes_with_the_uninterrupted_bytes_once_there_is_room(
+        tmp_path, pipeline_run):
+    """The tiny pipeline in a repo on a file system of half the space its run takes (workspace, DVC cache and
+    git): `dvc repro` stops at the stage that meets the full disk with one line naming the output, leaving no
+    temporary; once the file system is grown (a remount, the repo still on it), `dvc repro` finishes with the
+    bytes of the run that never met a full disk. Its own tier (`make soak`): a second run of the tiny pipeline."""
+    from tiny_repo import ENV, lock_outs, make_tiny_repo
+
+    first_repo, _, reference = pipeline_run
+    needed = _used_kib(first_repo)
+    with _disk(tmp_path / "disk", needed // 2) as disk:
+        repo = make_tiny_repo(disk / "repo")
+        full = subprocess.run(["dvc", "repro"], cwd=repo, env=ENV, capture_output=True, text=True)
+        said = full.stdout + full.stderr
+        assert full.returncode != 0, said[-3000:]
+        errors = [line for line in said.splitlines() if line.startswith("hnsdt: error:")]
+        assert len(errors) == 1 and "no space left on device writing" in errors[0], said[-3000:]
+        assert "Traceback" not in said, said[-3000:]
+        assert not list(repo.rglob(f"{TMP_PREFIX}*")), "a temporary of the write that met the full disk is left"
+        subprocess.run(["mount", "-o", f"remount,size={2 * needed}k", str(disk)], check=True)
+        again = subprocess.run(["dvc", "repro"], cwd=repo, env=ENV, capture_output=True, text=True)
+        assert again.returncode == 0, (again.stdout + again.stderr)[-3000:]
+        outs = lock_outs(repo)
+        assert outs.keys() == reference.keys()
+        assert {k for k in outs if outs[k] != reference[k]} <= {"evaluate:recordings"}
+        print(f"full at {needed // 2} KiB: {errors[0]}")
