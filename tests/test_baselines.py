@@ -161,6 +161,73 @@ def test_seeds_trained_as_a_stack_get_the_bytes_each_gets_alone(keydoor, learner
     assert not all(torch.equal(first[k], second[k]) for k in first)  # the seeds do differ
 
 
+class _Scripted:
+    """A validation measure that hands out ``values`` in turn and keeps each evaluated network's weights."""
+
+    def __init__(self, values):
+        self.values, self.weights = list(values), []
+
+    def __call__(self, net) -> float:
+        self.weights.append({k: v.clone() for k, v in net.state_dict().items()})
+        return self.values[len(self.weights) - 1]
+
+
+def _weights_sum(net) -> float:
+    """A measure that follows the weights (deterministic, different for every seed's run)."""
+    return -float(sum(p.double().sum() for p in net.parameters()))
+
+
+@pytest.mark.parametrize("learner", ["dqn", "options"])
+def test_an_online_learner_stops_at_the_plateau_of_its_validation_and_keeps_the_best_weights(keydoor, learner):
+    """Evaluated every 200 env steps: 5, 4, 3, 3.5, 3.2 with patience 2 -> the seed stops after the fifth
+    evaluation (1,000 of 2,000 steps; its exploration ends at 1,000) with the third's weights, its curve and data
+    used up to there. Fails when the rule is cut (it trains to the cap), keeps the last weights, or stops a seed
+    still exploring."""
+    knobs = dict(env_steps=2000, learning_starts=200, log_every=200, patience=2, validate_every=200, seed=1)
+    if learner == "dqn":
+        net, train, cfg = QNetworkConfig(keydoor.n_flags, *keydoor.shape, hidden=16), train_dqn, DQNConfig(**knobs)
+    else:
+        net, train, cfg = (OptionCriticConfig(keydoor.n_flags, *keydoor.shape, hidden=16, n_options=2),
+                           train_options, OptionsConfig(**knobs))
+    measure = _Scripted([5.0, 4.0, 3.0, 3.5, 3.2] + [1.0] * 10)
+    model, curve, usage = train(keydoor, 60, net, cfg, progress=False, measure=measure)
+    assert [h["step"] for h in usage["validation_steps"]] == [200, 400, 600, 800, 1000]
+    assert usage["env_steps"] == 1000 and usage["best_step"] == 600 and usage["stopped_early"]
+    assert curve[-1]["step"] == 1000 and not model.training
+    assert [r["validation_steps"] for r in curve if r["step"] % 200 == 0] == [5.0, 4.0, 3.0, 3.5, 3.2]  # (its curve)
+    assert all(torch.equal(v, measure.weights[2][k]) for k, v in model.state_dict().items())
+    assert not all(torch.equal(v, measure.weights[4][k]) for k, v in model.state_dict().items())
+    # ... and not before: a measure that keeps improving trains to the cap
+    _, curve, usage = train(keydoor, 60, net, cfg, progress=False, measure=_Scripted(np.linspace(10, 1, 10)))
+    assert usage["env_steps"] == 2000 and usage["best_step"] == 2000 and not usage["stopped_early"]
+    assert len(usage["validation_steps"]) == 10 and curve[-1]["step"] == 2000
+    # ... nor while it explores: flat from the start, it stops once ε has decayed (1,000 steps), not at 600
+    _, _, usage = train(keydoor, 60, net, cfg, progress=False, measure=_Scripted([5.0] * 10))
+    assert usage["env_steps"] == 1000 and usage["best_step"] == 200
+    with pytest.raises(ValueError, match="needs that measure"):
+        train(keydoor, 60, net, cfg, progress=False)
+
+
+@pytest.mark.parametrize("learner", ["dqn", "options"])
+def test_seeds_that_stop_apart_in_a_stack_get_what_each_gets_alone(keydoor, learner):
+    """Seeds stacked with a validation plateau stop at different evaluations; each one's weights, curve and data
+    used are those of its run alone (a stopped seed trains on in the stack, unseen)."""
+    knobs = dict(env_steps=1200, learning_starts=200, log_every=100, patience=1, validate_every=100)
+    if learner == "dqn":
+        net, train = QNetworkConfig(keydoor.n_flags, *keydoor.shape, hidden=13), train_dqn
+        cfgs = [DQNConfig(**knobs, seed=s) for s in (2, 0, 1)]
+    else:
+        net, train = OptionCriticConfig(keydoor.n_flags, *keydoor.shape, hidden=13, n_options=3), train_options
+        cfgs = [OptionsConfig(**knobs, seed=s) for s in (2, 0, 1)]
+    stacked = train(keydoor, 30, net, cfgs, progress=False, measure=_weights_sum)
+    alone = [train(keydoor, 30, net, cfg, progress=False, measure=_weights_sum) for cfg in cfgs]
+    for (a, curve_a, usage_a), (b, curve_b, usage_b) in zip(stacked, alone):
+        assert all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values()))
+        np.testing.assert_equal(curve_a, curve_b)  # (NaN before the first episode ends)
+        assert usage_a == usage_b
+    assert len({u["env_steps"] for _, _, u in stacked}) > 1, "the seeds stopped together: the test shows nothing"
+
+
 def test_a_stack_is_of_one_training_config_and_of_linear_layers(keydoor):
     net = QNetworkConfig(keydoor.n_flags, *keydoor.shape, hidden=16)
     with pytest.raises(ValueError, match="share every training knob but their seed"):

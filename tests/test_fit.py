@@ -102,7 +102,22 @@ def _options(keydoor, **kw):
                          **kw)
 
 
-@pytest.mark.parametrize("train", [_dqn, _options], ids=["dqn", "option_critic"])
+def _weights_sum(net) -> float:
+    return float(sum(p.double().sum() for p in net.parameters()))
+
+
+def _dqn_validated(keydoor, **kw):
+    """DQN trained to a plateau (of a measure that follows the weights): it keeps the weights of step 1,000 and
+    stops at 1,400 of 1,600 steps."""
+    from hnsdt.baselines.dqn import DQNConfig, train_dqn
+    from hnsdt.models.qnetwork import QNetworkConfig
+
+    return train_dqn(keydoor, 100, QNetworkConfig(keydoor.n_flags, *keydoor.shape, hidden=32),
+                     DQNConfig(env_steps=1600, learning_starts=400, log_every=400, seed=7, patience=2,
+                               validate_every=200), progress=False, measure=_weights_sum, **kw)
+
+
+@pytest.mark.parametrize("train", [_dqn, _options, _dqn_validated], ids=["dqn", "option_critic", "dqn_validated"])
 def test_an_online_run_paused_and_continued_elsewhere_is_the_run_in_one_go(keydoor, train):
     whole, whole_curve, whole_usage = train(keydoor)
     paused = train(keydoor, stop_after=800)
@@ -110,6 +125,8 @@ def test_an_online_run_paused_and_continued_elsewhere_is_the_run_in_one_go(keydo
     torch.manual_seed(123)
     part, part_curve, part_usage = train(keydoor, state=pickle.loads(pickle.dumps(paused)))
     assert part_usage == whole_usage
+    if train is _dqn_validated:  # (its evaluations before the pause and after it, its plateau after it)
+        assert whole_usage["stopped_early"] and (whole_usage["best_step"], whole_usage["env_steps"]) == (1000, 1400)
     np.testing.assert_equal(part_curve, whole_curve)  # (NaN losses before learning starts)
     for (name, a), b in zip(whole.state_dict().items(), part.state_dict().values()):
         assert torch.equal(a, b), name

@@ -964,6 +964,34 @@ def test_an_offline_baselines_patience_stops_it_on_the_validation_layouts(tmp_pa
         plan_runs(validate(params), "keydoor", "lstm_hier", [0], dataset)
 
 
+def test_an_online_learners_patience_stops_it_on_validation_starts_of_its_maps(tmp_path):
+    """``patience`` of an online learner: on the unseen layouts (``generalisation.budgets.dqn``) it is evaluated
+    greedily on the validation layouts, on a paper map (``baselines.dqn``) from that map's start and random
+    states of it; either way it keeps the weights of its best evaluation, whose measure is the history's best."""
+    from hnsdt.compose import generalisation as gen
+    from hnsdt.compose.training import plan_runs, train_run
+    from hnsdt.envs import load_layout
+
+    params = _tiny_generalisation_params(tmp_path)
+    params["generalisation"].update(methods=["hnsdt"], baselines=["dqn"], validation_layouts=1, budgets={
+        "dqn": {"env_steps": 1200, "patience": 1, "validate_every": 400, "starts": 6}})
+    dataset = collect_unseen(validate(params), tmp_path / "ds", progress=False)
+    (run,) = plan_unseen(validate(params), "dqn", dataset)
+    assert [c.layout for c in run.measure.courses] == [s.layout for s in gen.validation_layouts(validate(params))]
+    params["baselines"]["dqn"].update(env_steps=1200, learning_starts=200, patience=1, validate_every=400, starts=6)
+    (paper,) = plan_runs(validate(params), "keydoor", "dqn", [0], None)
+    assert [c.layout for c in paper.measure.courses] == [load_layout("keydoor_5x5")]
+    assert len(paper.measure.courses[0].starts) == 6
+    for task in (run, paper):
+        model, facts, curve = train_run(task)
+        usage = facts["usage"]
+        history = [h["value"] for h in usage["validation_steps"]]
+        best = int(np.argmin(history))
+        assert usage["best_step"] == usage["validation_steps"][best]["step"] and 1 <= len(history) <= 3
+        assert task.measure(model) == history[best]  # the kept weights are the best evaluation's
+        assert curve[-1]["step"] <= usage["env_steps"]
+
+
 def test_a_further_experiment_is_a_params_block_of_the_keys_it_changes(tmp_path):
     """``unseen_experiments.<name>``: the `generalisation` section with that block's keys changed is what every
     stage of the experiment reads (the section itself unchanged); a bad key, value or name is one line naming it."""

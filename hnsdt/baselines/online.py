@@ -38,6 +38,12 @@ class OnlineConfig:
     seed: int = 0
     device: str = "cpu"
     log_every: int = 2_000  # env steps between training-curve rows
+    patience: int = 0  # > 0: a seed stops once its greedy steps to the exit on validation start states have not
+    #                    improved for this many evaluations, its exploration over, keeping its best evaluation's
+    #                    weights (env_steps is then the cap); 0: it trains all env_steps
+    validate_every: int = 5_000  # with patience: env steps between those evaluations
+    starts: int = 64  # with patience: about this many validation start states (the map's start and random states
+    #                   of it; the unseen layouts': spread over the validation layouts)
 
 
 def training_env(layout: Layout | list[Layout], max_steps: int, num_envs: int, fail_probs, view_radius: int = 0):
@@ -142,6 +148,37 @@ def unstack_network(stacked: nn.Module, nets: list[nn.Module]) -> list[nn.Module
 
 
 @dataclass
+class Plateau:
+    """One seed's training to the plateau of a validation measure (``OnlineConfig.patience``; lower is better,
+    e.g. :class:`hnsdt.evaluation.validation.StepsToExit`): its evaluations, the best one's weights, and what the
+    seed had used when it stopped — it stops once ``patience`` evaluations bring no better value, or one reaches
+    the measure's ``floor`` (no model does better), but not while it still explores (ε above its end: a seed
+    that has never reached the exit is not at a plateau). Seeds in a stack stop apart; a stopped seed's weights
+    go on training beside the others but are not its result."""
+
+    patience: int
+    floor: float
+    history: list[dict] = field(default_factory=list)  # {"step", "value"} per evaluation
+    best: tuple | None = None  # (value, evaluation index, step, weights) of the best evaluation so far
+    stopped: dict | None = None  # the data used when it stopped (env steps, episodes, gradient steps)
+
+    def update(self, steps: int, value: float, net: nn.Module, used: dict, may_stop: bool = True) -> None:
+        self.history.append({"step": steps, "value": value})
+        if self.best is None or value < self.best[0]:
+            self.best = (value, len(self.history) - 1, steps,
+                         {k: v.detach().cpu().clone() for k, v in net.state_dict().items()})
+        if may_stop and (value <= self.floor + 1e-9 or len(self.history) - 1 - self.best[1] >= self.patience):
+            self.stopped = used
+
+    def record(self, name: str = "steps") -> dict:
+        """What a checkpoint's usage says of the budget the evidence chose (as the offline learners'
+        :meth:`hnsdt.models.fit.Validation.record`, in env steps)."""
+        floor = {"validation_floor": self.floor} if np.isfinite(self.floor) else {}
+        return {"best_step": self.best[2] if self.best else None, "stopped_early": self.stopped is not None,
+                f"validation_{name}": self.history, **floor}
+
+
+@dataclass
 class OnlineRun:
     """What an online learner's seeds start from, built seed by seed in one order so that a seed gives the same
     run whichever seeds train beside it: its generator, training copies, replay buffer and statistics; the
@@ -164,6 +201,7 @@ class OnlineRun:
     curves: list[list[dict]] = field(default_factory=list)
     loop: dict = field(default_factory=dict)  # the learner's own loop variables, kept while paused
     torch_rng: torch.Tensor | None = None  # the torch stream, kept while paused (no learner here draws from it yet)
+    plateaus: list[Plateau] | None = None  # per seed, when it trains to a validated plateau
 
     def pause(self, steps: int, **loop) -> OnlineRun:
         """The run as it stands, to continue later, in this process or another (pickled whole: the networks,
@@ -215,20 +253,51 @@ class OnlineRun:
 
     def curve_rows(self, steps: int, epsilon: float, extra: list[dict] | None = None) -> None:
         """A training-curve row per seed: env steps, ε, the episodes finished and the mean loss since the last
-        row, and the seed's ``extra``."""
+        row, the seed's ``extra``, and with a plateau its validation value at this step (NaN between)."""
         for i, (curve, stats) in enumerate(zip(self.curves, self.stats)):
             losses = self.losses[i]
+            validation = {}
+            if self.plateaus is not None:
+                history = self.plateaus[i].history
+                validation = {"validation_steps": history[-1]["value"] if history and history[-1]["step"] == steps
+                              else float("nan")}
             curve.append({"step": steps, "epsilon": round(epsilon, 4), **stats.row(),
                           "loss": float(np.mean(losses)) if losses else float("nan"),
-                          **(extra[i] if extra else {})})
+                          **(extra[i] if extra else {}), **validation})
             self.losses[i] = []
 
+    def validate(self, steps: int, measure, may_stop: bool) -> bool:
+        """Every seed still training evaluated by ``measure`` (its greedy agent; :class:`Plateau`), stopped at
+        its plateau if ``may_stop``; whether all have stopped (:meth:`done`)."""
+        for i, (net, plateau) in enumerate(zip(unstack_network(self.net, self.nets), self.plateaus)):
+            if plateau.stopped is None:
+                with torch.no_grad():
+                    value = float(measure(net.eval()))
+                plateau.update(steps, value, net, self.used(i, steps), may_stop)
+        return self.done()
+
+    def done(self) -> bool:
+        """Whether every seed has stopped at its plateau (never, without one)."""
+        return self.plateaus is not None and all(p.stopped is not None for p in self.plateaus)
+
+    def used(self, seed: int, steps: int) -> dict:
+        return {"env_steps": steps, "episodes": self.stats[seed].episodes, "gradient_steps": self.grad_steps}
+
     def result(self, steps: int) -> list[tuple[torch.nn.Module, list[dict], dict]]:
-        """The trainer's return per seed: its network (eval mode), its curve and the data it used."""
+        """The trainer's return per seed: its network (eval mode), its curve and the data it used; with a
+        plateau, the best evaluation's weights, and the curve and the data up to where the seed stopped."""
         nets = unstack_network(self.net, self.nets)
-        return [(net.eval(), curve, {"env_steps": steps, "episodes": stats.episodes,
-                                     "gradient_steps": self.grad_steps})
-                for net, curve, stats in zip(nets, self.curves, self.stats)]
+        out = []
+        for i, (net, curve) in enumerate(zip(nets, self.curves)):
+            usage = self.used(i, steps)
+            if self.plateaus is not None:
+                plateau = self.plateaus[i]
+                usage = dict(plateau.stopped or usage) | plateau.record()
+                curve = [row for row in curve if row["step"] <= usage["env_steps"]]
+                if plateau.best is not None:
+                    net.load_state_dict(plateau.best[3])
+            out.append((net.eval(), curve, usage))
+        return out
 
 
 def seed_configs(cfg: OnlineConfig | list[OnlineConfig]) -> list[OnlineConfig]:
@@ -240,14 +309,17 @@ def seed_configs(cfg: OnlineConfig | list[OnlineConfig]) -> list[OnlineConfig]:
 
 
 def start_run(layout: Layout | list[Layout], max_steps: int, network: type, net_cfg, cfgs: list[OnlineConfig],
-              state: OnlineRun | None = None) -> OnlineRun:
+              state: OnlineRun | None = None, measure=None) -> OnlineRun:
     """Per seed of ``cfgs`` (:func:`seed_configs`): seed torch and numpy, build the training copies, the network
     (``network(net_cfg)``), the first observations, the replay buffer and the episode statistics; then stack the
     networks, copy the stack as the target and build Adam. Or continue ``state``, a paused run
-    (:meth:`OnlineRun.pause`)."""
+    (:meth:`OnlineRun.pause`). With ``patience``, ``measure`` is the validation measure its seeds stop on."""
     if state is not None:
         return state.resume()
     cfg, device = cfgs[0], torch.device(cfgs[0].device)
+    if cfg.patience and measure is None:
+        raise ValueError("patience > 0 stops on the greedy steps to the exit from validation start states: "
+                         "the trainer needs that measure")
     rngs, envs, nets, obs = [], [], [], []
     for c in cfgs:
         torch.manual_seed(c.seed)
@@ -257,16 +329,18 @@ def start_run(layout: Layout | list[Layout], max_steps: int, network: type, net_
         obs.append(envs[-1].reset(seed=c.seed)[0])
     net = stack_networks(nets)
     obs = np.stack(obs)
+    floor = float(getattr(measure, "floor", float("-inf")))
     return OnlineRun(rngs, device, envs, nets, net, copy.deepcopy(net), Adam(net.parameters(), lr=cfg.lr), obs,
                      [ReplayBuffer(cfg.buffer_size, obs.shape[-1], rng) for rng in rngs],
                      [EpisodeStats(cfg.num_envs) for _ in cfgs], losses=[[] for _ in cfgs],
-                     curves=[[] for _ in cfgs])
+                     curves=[[] for _ in cfgs],
+                     plateaus=[Plateau(cfg.patience, floor) for _ in cfgs] if cfg.patience else None)
 
 
 def finish(run: OnlineRun, steps: int, cfg, **loop):
-    """The trainer's return: the paused run when ``steps`` fall short of the budget, else the result of each seed
-    (a list for a list of configs, the one result for one)."""
-    if steps < seed_configs(cfg)[0].env_steps:
+    """The trainer's return: the paused run when ``steps`` fall short of the budget and a seed has not reached
+    its plateau, else the result of each seed (a list for a list of configs, the one result for one)."""
+    if steps < seed_configs(cfg)[0].env_steps and not run.done():
         return run.pause(steps, **loop)
     results = run.result(steps)
     return results if isinstance(cfg, (list, tuple)) else results[0]

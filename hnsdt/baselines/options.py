@@ -53,14 +53,16 @@ def choose_options(q: torch.Tensor, epsilon: float, rng: np.random.Generator) ->
 
 def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: OptionCriticConfig,
                   cfg: OptionsConfig | list[OptionsConfig], progress: bool = True, desc: str = "train",
-                  network: type = OptionCritic, state: OnlineRun | None = None, stop_after: int | None = None):
+                  network: type = OptionCritic, state: OnlineRun | None = None, stop_after: int | None = None,
+                  measure=None):
     """``layout``: one map, or a list to draw from at every reset (then ``network`` reads views). ``cfg``: one
     config, or one per seed of a stack trained in lockstep (:class:`OnlineRun`). Returns the model, its curve and
     the data used (a list of them for a list of configs); or, when ``stop_after`` env steps come before the end,
-    the paused :class:`OnlineRun`, which ``state`` continues."""
+    the paused :class:`OnlineRun`, which ``state`` continues. With ``cfg.patience``, each seed stops at the
+    plateau of ``measure`` (:class:`~hnsdt.baselines.online.Plateau`)."""
     cfgs = seed_configs(cfg)
     c, n = cfgs[0], len(cfgs)
-    run = start_run(layout, max_steps, network, net_cfg, cfgs, state)
+    run = start_run(layout, max_steps, network, net_cfg, cfgs, state, measure)
     net, target, device, steps = run.net, run.target, run.device, run.steps
     seed_rows = torch.arange(n, device=device)[:, None]  # (with copy_rows: each copy's option of each seed)
     copy_rows = torch.arange(c.num_envs, device=device)[None, :]
@@ -68,6 +70,7 @@ def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: Option
     need_option = run.loop.get("need_option", np.ones((n, c.num_envs), bool))
     next_log, lengths = run.loop.get("next_log", c.log_every), run.loop.get("lengths", [[] for _ in cfgs])
     option_steps = run.loop.get("option_steps", 0)
+    next_check = run.loop.get("next_check", c.validate_every)
     explore_steps = int(c.exploration_fraction * c.env_steps)
     limit = c.env_steps if stop_after is None else min(stop_after, c.env_steps)
     bar = tqdm(total=c.env_steps, initial=steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
@@ -124,15 +127,22 @@ def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: Option
         run.restart(next_obs, done)
         steps += c.num_envs
         bar.update(c.num_envs)
-        if steps >= next_log or steps >= c.env_steps:
-            next_log += c.log_every
+        evaluated = run.plateaus is not None and steps >= next_check  # with patience: each seed's greedy steps
+        if evaluated:  # to the exit on validation, every `validate_every` env steps
+            next_check += c.validate_every
+            run.validate(steps, measure, may_stop=steps >= explore_steps)
+        logged = steps >= next_log or steps >= c.env_steps
+        if logged or evaluated:
+            next_log += c.log_every if logged else 0
             run.curve_rows(steps, epsilon, [{"option_length": option_steps / max(sum(seed_lengths), 1)}
                                             for seed_lengths in lengths])
             lengths, option_steps = [[] for _ in cfgs], 0
             bar.set_postfix(success=f"{run.curves[0][-1]['success']:.2f}", eps=f"{epsilon:.2f}")
+        if run.done():  # every seed at its plateau
+            break
     bar.close()
     return finish(run, steps, cfg, option=option, need_option=need_option, next_log=next_log, lengths=lengths,
-                  option_steps=option_steps)
+                  option_steps=option_steps, next_check=next_check)
 
 
 class OptionsAgent(OnlineAgent):

@@ -87,10 +87,15 @@ def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: 
             data, facts = source, {"dataset": str(dataset)}
         else:
             data, facts = (bs.env.layout, bs.env.max_steps), {}
+        measure = None
         if getattr(bs.train, "patience", 0):
-            raise params.error(f"baselines.{method}.patience stops on validation layouts, which only the "
-                               f"unseen-layout experiment has: set it in generalisation.budgets.{method}")
-        runs.append(TrainTask(method, seed, bs.model, bs.train, data, facts))
+            if kind == "offline":
+                raise params.error(f"baselines.{method}.patience stops on validation layouts, which only the "
+                                   f"unseen-layout experiment has: set it in generalisation.budgets.{method}")
+            # greedy from the map's start and random states of it (an online learner trains from its start)
+            measure = StepsToExit.on_layouts([bs.env.layout], bs.env.max_steps, bs.train.starts, method,
+                                             method_executor(params, method), facts)
+        runs.append(TrainTask(method, seed, bs.model, bs.train, data, facts, measure=measure))
     return runs
 
 
@@ -165,7 +170,8 @@ def train_run(task: TrainTask | SeedStack):
     trainer, network = resolve(code_of(first.method).trainer), network_for(first.method, first.model_cfg)
     if METHODS[first.method].training == "online":  # on (layout(s), max_steps), every seed of the stack at once
         out = trainer(*first.data, first.model_cfg, [r.train_cfg for r in runs], progress=first.progress,
-                      desc=f"{first.method} seed {', '.join(str(r.seed) for r in runs)}", network=network)
+                      desc=f"{first.method} seed {', '.join(str(r.seed) for r in runs)}", network=network,
+                      measure=first.measure)
         results = [_trained(run, *result) for run, result in zip(runs, out)]
         return results if isinstance(task, SeedStack) else results[0]
     extra = {"measure": task.measure} if task.measure is not None else {}  # (DTs; offline baselines with patience)
@@ -211,13 +217,15 @@ def train_all(runs: list[TrainTask], env: str, out: Path, curves: Path, compute,
 
 
 def _usage_text(usage: dict) -> str:
-    """The training record in one short line: a validation history (a list per epoch, in the checkpoint's
-    ``config.json``) shows as its length and best value."""
+    """The training record in one short line: a validation history (a list per epoch or evaluation, in the
+    checkpoint's ``config.json``) shows as its length and best value."""
     parts = []
     for key, value in usage.items():
         if isinstance(value, list) and value:
             best = min(value, key=lambda h: h["value"])
-            value = f"{len(value)} epochs, best {best['value']:.4g} at epoch {best['epoch']}"
+            unit = "epoch" if "epoch" in best else "step"
+            value = f"{len(value)} {unit == 'epoch' and 'epochs' or 'evaluations'}, best {best['value']:.4g} at " \
+                    f"{unit} {best[unit]}"
         parts.append(f"{key} {value}")
     return ", ".join(parts)
 

@@ -67,7 +67,8 @@ def training_usage(models_root: str | Path, env: str, method: str, seed: int) ->
     return {"method": method, "env": env, "seed": seed, "training": lookup_method(method).training,
             "env_steps": usage.get("env_steps"), "dataset_frames": usage.get("dataset_frames"),
             "epochs": usage.get("epochs"), "gradient_steps": usage.get("gradient_steps"),
-            "epoch_kept": usage.get("best_epoch")}  # trained to a validation plateau: the epoch whose weights it kept
+            "epoch_kept": usage.get("best_epoch"),  # trained to a validation plateau: the epoch whose weights it
+            "env_steps_kept": usage.get("best_step")}  # kept (offline), or the env step (online)
 
 
 @dataclass(frozen=True)

@@ -49,25 +49,27 @@ def paper_target_lines(summ: pd.DataFrame) -> list[str]:
 
 def usage_lines(results: Path) -> list[str]:
     """What each learned method trained on (mean over seeds): env steps (online) or dataset frames, the passes
-    over its training data (epochs), gradient steps and, stopped by a validation measure, the epoch kept
-    (offline)."""
+    over its training data (epochs), gradient steps and, stopped by a validation measure, the epoch (offline) or
+    environment step (online) kept."""
     path = results / "training_usage.csv"
     if not path.is_file():
         return []
     u = pd.read_csv(path)
     if u.empty:
         return []
-    for column in ("epochs", "epoch_kept"):
+    for column in ("epochs", "epoch_kept", "env_steps_kept"):
         if column not in u:
             u[column] = float("nan")
     lines = ["| env | method | trains on | environment steps | dataset frames | epochs | gradient steps | "
-             "epoch kept |", "|---|---|---|---|---|---|---|---|"]
+             "epoch or step kept |", "|---|---|---|---|---|---|---|---|"]
     order = {m: i for i, m in enumerate(METHODS)}
     g = u.groupby(["env", "method", "training"], as_index=False)[["env_steps", "dataset_frames", "epochs",
-                                                                  "gradient_steps", "epoch_kept"]].mean()
+                                                                  "gradient_steps", "epoch_kept",
+                                                                  "env_steps_kept"]].mean()
     g = g.sort_values(["env", "method"], key=lambda c: c.map(order) if c.name == "method" else c)
     for r in g.itertuples():
         lines.append(f"| {r.env} | {label(r.method)} | {'the environment' if r.training == 'online' else 'the dataset'}"
                      f" | {fmt(r.env_steps, ',.0f')} | {fmt(r.dataset_frames, ',.0f')} | "
-                     f"{fmt(r.epochs, '.1f')} | {fmt(r.gradient_steps, ',.0f')} | {fmt(r.epoch_kept, '.1f')} |")
+                     f"{fmt(r.epochs, '.1f')} | {fmt(r.gradient_steps, ',.0f')} | "
+                     f"{fmt(r.epoch_kept, '.1f') if r.epoch_kept == r.epoch_kept else fmt(r.env_steps_kept, ',.0f')} |")
     return lines
