@@ -151,9 +151,9 @@ def unstack_network(stacked: nn.Module, nets: list[nn.Module]) -> list[nn.Module
 class Plateau:
     """One seed's training to the plateau of a validation measure (``OnlineConfig.patience``; lower is better,
     e.g. :class:`hnsdt.evaluation.validation.StepsToExit`): its evaluations, the best one's weights, and what the
-    seed had used when it stopped — it stops once ``patience`` evaluations bring no better value, or one reaches
-    the measure's ``floor`` (no model does better), but not while it still explores (ε above its end: a seed
-    that has never reached the exit is not at a plateau). Seeds in a stack stop apart; a stopped seed's weights
+    seed had used when it stopped — it stops once ``patience`` evaluations bring no better value, but not while
+    it still explores (ε above its end: a seed that has never reached the exit is not at a plateau), or as soon
+    as one reaches the measure's ``floor`` (no model does better: no later one could replace it). Seeds in a stack stop apart; a stopped seed's weights
     go on training beside the others but are not its result."""
 
     patience: int
@@ -167,8 +167,8 @@ class Plateau:
         if self.best is None or value < self.best[0]:
             self.best = (value, len(self.history) - 1, steps,
                          {k: v.detach().cpu().clone() for k, v in net.state_dict().items()})
-        if may_stop and (value <= self.floor + 1e-9 or len(self.history) - 1 - self.best[1] >= self.patience):
-            self.stopped = used
+        if value <= self.floor + 1e-9 or (may_stop and len(self.history) - 1 - self.best[1] >= self.patience):
+            self.stopped = used  # (at the floor at once: no later evaluation could replace it)
 
     def record(self, name: str = "steps") -> dict:
         """What a checkpoint's usage says of the budget the evidence chose (as the offline learners'
