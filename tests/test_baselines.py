@@ -94,10 +94,17 @@ def test_recurrent_baselines_learn_case1(keydoor, params, random_success, method
 
 @pytest.mark.learning
 def test_dqn_learns_case1(keydoor, params, random_success):
-    """The default Case 1 configuration (params.yaml), evaluated at fail_prob 0."""
+    """The default Case 1 configuration (params.yaml: to its validated plateau, the stages' measure), evaluated at
+    fail_prob 0."""
+    from hnsdt.compose.config import method_executor
+    from hnsdt.evaluation.validation import StepsToExit
+
     settings = baseline_settings(params, "dqn", "keydoor", 0)
-    model, curve, usage = train_dqn(keydoor, 100, settings.model, settings.train, progress=False)
-    assert usage["env_steps"] == settings.train.env_steps and usage["gradient_steps"] > 3000
+    measure = StepsToExit.on_layouts([keydoor], 100, settings.train.starts, "dqn", method_executor(params, "dqn"),
+                                     {})
+    model, curve, usage = train_dqn(keydoor, 100, settings.model, settings.train, progress=False, measure=measure)
+    assert usage["env_steps"] <= settings.train.env_steps and usage["gradient_steps"] > 1000
+    assert usage["validation_steps"][-1]["value"] == measure.floor  # (the optimum's steps from the start)
     assert curve[-1]["success"] > curve[0]["success"]
     assert _success(keydoor, DQNAgent(model)) >= 0.9 > random_success + 0.5
 
@@ -116,7 +123,8 @@ def test_options_learns_to_cross_a_room(params):
     random_success = _success(room, RandomAgent(0), horizon=20)
     settings = baseline_settings(params, "options", "keydoor", 0)
     successes = []
-    cfgs = [replace(settings.train, env_steps=10_000, learning_starts=500, seed=seed) for seed in range(3)]
+    cfgs = [replace(settings.train, env_steps=10_000, learning_starts=500, patience=0, seed=seed)  # (a fixed budget)
+            for seed in range(3)]
     # (the three seeds as one stack: each the bytes of its run alone, test_seeds_trained_as_a_stack_…)
     for model, curve, usage in train_options(room, 20, replace(settings.model, n_flags=room.n_flags), cfgs,
                                              progress=False):
