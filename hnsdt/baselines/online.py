@@ -41,9 +41,10 @@ class OnlineConfig:
     patience: int = 0  # > 0: a seed stops once its greedy steps to the exit on validation start states have not
     #                    improved for this many evaluations, its exploration over, keeping its best evaluation's
     #                    weights (env_steps is then the cap); 0: it trains all env_steps
-    validate_every: int = 5_000  # with patience: env steps between those evaluations
-    starts: int = 64  # with patience: about this many validation start states (the map's start and random states
-    #                   of it; the unseen layouts': spread over the validation layouts)
+    validate_every: int = 10_000  # with patience: env steps between those evaluations
+    starts: int = 1  # with patience: about this many validation start states: the map's start, then random states
+    #                  of it (which a learner from the start never visits); the unseen layouts': spread over the
+    #                  validation layouts, each one's start first
 
 
 def training_env(layout: Layout | list[Layout], max_steps: int, num_envs: int, fail_probs, view_radius: int = 0):
@@ -153,8 +154,8 @@ class Plateau:
     e.g. :class:`hnsdt.evaluation.validation.StepsToExit`): its evaluations, the best one's weights, and what the
     seed had used when it stopped — it stops once ``patience`` evaluations bring no better value, but not while
     it still explores (ε above its end: a seed that has never reached the exit is not at a plateau), or as soon
-    as one reaches the measure's ``floor`` (no model does better: no later one could replace it). Seeds in a stack stop apart; a stopped seed's weights
-    go on training beside the others but are not its result."""
+    as one reaches the measure's ``floor`` (no model does better: no later one could replace it). Seeds in a
+    stack stop apart; a stopped seed's weights go on training beside the others but are not its result."""
 
     patience: int
     floor: float

@@ -92,7 +92,7 @@ def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: 
             if kind == "offline":
                 raise params.error(f"baselines.{method}.patience stops on validation layouts, which only the "
                                    f"unseen-layout experiment has: set it in generalisation.budgets.{method}")
-            # greedy from the map's start and random states of it (an online learner trains from its start)
+            # greedy from the map's start (where an online learner trains from), and random states with starts > 1
             measure = StepsToExit.on_layouts([bs.env.layout], bs.env.max_steps, bs.train.starts, method,
                                              method_executor(params, method), facts)
         runs.append(TrainTask(method, seed, bs.model, bs.train, data, facts, measure=measure))
@@ -223,9 +223,8 @@ def _usage_text(usage: dict) -> str:
     for key, value in usage.items():
         if isinstance(value, list) and value:
             best = min(value, key=lambda h: h["value"])
-            unit = "epoch" if "epoch" in best else "step"
-            value = f"{len(value)} {unit == 'epoch' and 'epochs' or 'evaluations'}, best {best['value']:.4g} at " \
-                    f"{unit} {best[unit]}"
+            unit, count = ("epoch", "epochs") if "epoch" in best else ("step", "evaluations")
+            value = f"{len(value)} {count}, best {best['value']:.4g} at {unit} {best[unit]}"
         parts.append(f"{key} {value}")
     return ", ".join(parts)
 

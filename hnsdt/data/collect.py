@@ -163,8 +163,8 @@ def collect_dataset(cfg: CollectConfig, root: str | Path, repo_id: str, progress
 
 SHARD_LAYOUTS = 1_000  # layouts per shard of a dataset over more: each shard is collected and written by a worker
 #                        process (its memory bounded by the shard, not the dataset), then they are joined one at a
-#                        time (hnsdt.data.lerobot_io.join); the bytes depend on this number, not on the workers (docs/timings.md, "Ten times the
-#                        data")
+#                        time (hnsdt.data.lerobot_io.join); the bytes depend on this number, not on the workers
+#                        (docs/timings.md, "Ten times the data")
 
 
 def collect_on_layouts(cfg: CollectConfig, layouts: list[Layout], root: str | Path, repo_id: str, view_radius: int,

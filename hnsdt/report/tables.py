@@ -71,5 +71,5 @@ def usage_lines(results: Path) -> list[str]:
         lines.append(f"| {r.env} | {label(r.method)} | {'the environment' if r.training == 'online' else 'the dataset'}"
                      f" | {fmt(r.env_steps, ',.0f')} | {fmt(r.dataset_frames, ',.0f')} | "
                      f"{fmt(r.epochs, '.1f')} | {fmt(r.gradient_steps, ',.0f')} | "
-                     f"{fmt(r.epoch_kept, '.1f') if r.epoch_kept == r.epoch_kept else fmt(r.env_steps_kept, ',.0f')} |")
+                     f"{fmt(r.epoch_kept, '.1f') if pd.notna(r.epoch_kept) else fmt(r.env_steps_kept, ',.0f')} |")
     return lines
