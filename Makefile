@@ -21,10 +21,7 @@ $(STAMP): requirements.lock pyproject.toml
 
 # The whole default pipeline: collect -> ... as declared in dvc.yaml.
 pipeline: $(STAMP)
-	@$(BIN)/python -c "import yaml; from dvc.schema import COMPILED_LOCKFILE_SCHEMA as lock;\
-	 lock(yaml.safe_load(open('dvc.lock')))" 2>/dev/null || { echo "make: dvc.lock is\
-	 damaged (a run killed while DVC rewrote it in place): git checkout dvc.lock, then make pipeline again (stages\
-	 finished since come back from DVC's run cache)"; exit 2; }
+	@$(BIN)/python tools/check_locks.py
 	PATH="$(BIN):$$PATH" dvc repro
 
 # Every tier: unit tests and smoke runs, learning thresholds (-m learning), the real pipeline end to end (-m slow).

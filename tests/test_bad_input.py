@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -275,3 +277,23 @@ def test_a_dataset_without_an_operator_s_segments_stops_training(tmp_path):
 
 def test_the_table_has_at_least_twenty_cases():
     assert len(PARAM_CASES) + len(LAYOUT_CASES) + len(DATASET_CASES) + len(CHECKPOINT_CASES) + 1 >= 20
+
+
+@pytest.mark.parametrize("name, cut, recovery", [
+    ("dvc.lock", "schema: '2.0'\nstages:\n  collect@keydoor:\n    cmd: 'python pipe", "git checkout dvc.lock"),
+    ("dvc.lock", "schema: '2.0'\nstages:\n  collect@keydoor:\n", "git checkout dvc.lock"),
+    (".dvc/tmp/rwlock", '{"write": {"/repo/data/datasets/keydoor": {"pid": 12', "rm .dvc/tmp/rwlock"),
+])
+def test_a_dvc_lock_file_cut_short_stops_make_pipeline_in_one_line(tmp_path, name, cut, recovery):
+    """What a run killed while DVC rewrote one of its lock files in place leaves (the soak found both): `make
+    pipeline`'s check (tools/check_locks.py) names the file and its recovery; whole files pass."""
+    check = [sys.executable, str(Path(REPO, "tools/check_locks.py"))]
+    (tmp_path / ".dvc/tmp").mkdir(parents=True)
+    shutil.copy(Path(REPO, "dvc.lock"), tmp_path / "dvc.lock")
+    (tmp_path / ".dvc/tmp/rwlock").write_text('{"write": {}, "read": {}}')
+    assert subprocess.run(check, cwd=tmp_path, capture_output=True).returncode == 0
+    (tmp_path / name).write_text(cut)
+    out = subprocess.run(check, cwd=tmp_path, capture_output=True, text=True)
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and len(lines) == 1, out.stderr
+    assert f"{name} is damaged" in lines[0] and recovery in lines[0], lines[0]

@@ -6,10 +6,13 @@ import os
 import random
 import signal
 import subprocess
+import sys
 import time
+from pathlib import Path
 
 import pytest
 
+from conftest import REPO
 from hnsdt.core.fileio import TMP_PREFIX
 from tiny_repo import ENV, lock_outs, make_tiny_repo, run
 
@@ -23,26 +26,33 @@ def _stages_started(log: str) -> list[str]:
     return [line.split("'")[1] for line in log.splitlines() if line.startswith("Running stage '")]
 
 
-def _damaged_lock(log: str) -> bool:
-    """DVC rewrites dvc.lock in place, not atomically: a kill while it writes leaves it cut short, and the next
-    `dvc repro` stops with "'./dvc.lock' is invalid" (not YAML) or "'./dvc.lock' validation failed" (YAML, but
-    a stage cut off before its keys)."""
-    return "dvc.lock' is invalid" in log or "dvc.lock' validation failed" in log
+def _damaged_lock(log: str) -> str | None:
+    """DVC rewrites two files in place, not atomically: a kill while it writes one leaves it cut short, and the
+    next `dvc repro` stops on it. dvc.lock: "'./dvc.lock' is invalid" (not YAML) or "'./dvc.lock' validation
+    failed" (YAML, but a stage cut off before its keys); .dvc/tmp/rwlock (which running process holds which
+    output): "Unable to read RWLock-file". Which file, or None."""
+    if "dvc.lock' is invalid" in log or "dvc.lock' validation failed" in log:
+        return "dvc.lock"
+    if "Unable to read RWLock-file" in log:
+        return ".dvc/tmp/rwlock"
+    return None
 
 
 def _recovered(returncode: int, said: str, repo) -> bool:
     """After a `dvc repro` that ran to its end: False if it succeeded; if it stopped on a lock file an earlier kill
-    cut short (its only allowed failure), what docs/reproducibility.md tells a user to do then — the committed
-    lock back (here none is committed: no lock; the stages finished since come back from DVC's run cache) — and
-    True."""
+    cut short (its only allowed failure), what docs/reproducibility.md (and `make pipeline`'s one line) tells a
+    user to do then — the committed dvc.lock back (here none is committed: no lock; the stages finished since come
+    back from DVC's run cache), or the rwlock removed (no dvc runs now) — and True."""
     if returncode == 0:
         return False
-    assert _damaged_lock(said), said[-3000:]
+    damaged = _damaged_lock(said)
+    assert damaged, said[-3000:]
+    assert subprocess.run([sys.executable, str(Path(REPO, "tools/check_locks.py"))], cwd=repo).returncode == 2
     tracked = subprocess.run(["git", "ls-files", "--error-unmatch", "dvc.lock"], cwd=repo, capture_output=True)
-    if tracked.returncode == 0:
+    if damaged == "dvc.lock" and tracked.returncode == 0:
         run(["git", "checkout", "dvc.lock"], repo)
     else:
-        (repo / "dvc.lock").unlink()
+        (repo / damaged).unlink()
     return True
 
 
@@ -58,9 +68,9 @@ def test_twenty_kills_anywhere_end_in_the_uninterrupted_run_s_bytes(tmp_path, fi
     """Each run is killed once it has started its first or second stage (at random) and a random 0–3 s more:
     inside a stage's imports, training or writing, or in DVC's bookkeeping between stages. A run that finishes
     before its kill leaves the pipeline up to date; the next one then forces a random stage and everything
-    downstream of it, so that all twenty kills land. A kill while DVC rewrites dvc.lock leaves it cut short (DVC
-    writes it in place): the next run stops on it, and the documented recovery follows (:func:`_recovered`).
-    Finding that was this test's first result (a clean-clone CI run, 2026-12-05)."""
+    downstream of it, so that all twenty kills land. A kill while DVC rewrites dvc.lock or its rwlock leaves it cut
+    short (DVC writes both in place): the next run stops on it, and the documented recovery follows (:func:`_recovered`).
+    Finding these was this test's first results (clean-clone CI runs, 2026-12-05: dvc.lock, then the rwlock)."""
     repo = make_tiny_repo(tmp_path / "repo")
     order = _stages_started(first_run[0])  # the pipeline's stages, in the order the uninterrupted run ran them
     rng = random.Random(SEED)
