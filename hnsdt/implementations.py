@@ -43,6 +43,9 @@ CODE = {
     "option_critic": Code("hnsdt.baselines.options:make_agent", "hnsdt.models.qnetwork:OptionCritic",
                           "hnsdt.baselines.options:OptionsConfig", "hnsdt.baselines.options:train_options",
                           "hnsdt.models.view:ViewOptionCritic"),
+    "policy_gradient": Code("hnsdt.baselines.ppo:make_agent", "hnsdt.models.qnetwork:ActorCritic",
+                            "hnsdt.baselines.ppo:PPOConfig", "hnsdt.baselines.ppo:train_ppo",
+                            "hnsdt.models.view:ViewActorCritic"),
     "controllers": Code("hnsdt.agents.symbolic:make_agent"),  # the planner and hand-written controllers
 }
 

@@ -89,7 +89,7 @@ PARAM_CASES = {
     "fail_prob above 1": ({"collect.fail_probs": [0.1, 1.5]}, COLLECT, "collect.fail_probs"),
     "fail_prob below 0": ({"evaluate.fail_probs": [-0.1]}, EVALUATE, "evaluate.fail_probs"),
     "unknown env id": ({"envs.keydoor.id": "hnsdt/Nope-v0"}, COLLECT, "not a registered id"),
-    "unknown method": ({"evaluate.methods": ["symbolic", "ppo"]}, EVALUATE, "evaluate.methods.1: Input should be 'lstm_hier'"),
+    "unknown method": ({"evaluate.methods": ["symbolic", "sac"]}, EVALUATE, "evaluate.methods.1: Input should be 'lstm_hier'"),
     "unknown behaviour policy": ({"collect.behaviours.0.policy": "teleport"}, COLLECT, "collect.behaviours.0.policy: Input should be 'random' or 'noisy_planner', got 'teleport'"),
     "unknown executor mode": ({"planner.mode": "astar"}, COLLECT, "planner.mode: Input should be 'bfs' or 'cost'"),
     "unknown operator set": ({"planner.operators": "teleport"}, COLLECT, "planner.operators: Input should be"),

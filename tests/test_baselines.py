@@ -1,4 +1,5 @@
-"""The four learned baselines: sizes as in the paper, real learning on Case 1, determinism, params errors."""
+"""The learned baselines (the paper's four, and PPO): sizes as in the paper, real learning on Case 1, determinism,
+params errors."""
 
 import copy
 from dataclasses import replace
@@ -10,6 +11,7 @@ import torch
 from hnsdt.agents import SymbolicAgent, rollout
 from hnsdt.baselines.dqn import DQNAgent, DQNConfig, train_dqn
 from hnsdt.baselines.options import OptionsAgent, OptionsConfig, train_options
+from hnsdt.baselines.ppo import PPOAgent, PPOConfig, train_ppo
 from hnsdt.baselines.recurrent import RecurrentAgent, RecurrentTrainConfig, episode_batch, train_recurrent
 from hnsdt.agents.rollout import RandomAgent
 from hnsdt.compose.config import ParamsError, baseline_settings, evaluate_settings, load_params
@@ -17,7 +19,8 @@ from hnsdt.compose.params import validate
 from hnsdt.models.windows import frames_from_arrays
 from hnsdt.envs import KeyDoorVectorEnv, load_layout
 from hnsdt.models.checkpoint import load_checkpoint, save_checkpoint
-from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig, QNetwork, QNetworkConfig
+from hnsdt.models.qnetwork import (ActorCritic, ActorCriticConfig, OptionCritic, OptionCriticConfig, QNetwork,
+                                   QNetworkConfig)
 from hnsdt.models.recurrent import GROUP_COSTS, START_ACTION, RecurrentConfig, RecurrentPolicy, length_groups
 
 from conftest import REPO
@@ -110,6 +113,24 @@ def test_dqn_learns_case1(keydoor, params, random_success):
 
 
 @pytest.mark.learning
+def test_ppo_learns_case1(keydoor, params, random_success):
+    """PPO's default Case 1 configuration to its validated plateau (the stages' measure), evaluated greedily at
+    fail_prob 0: it reaches the optimum's steps from the start (measured: both of seeds 0 and 1 at 50,176 env
+    steps) and succeeds from the start's episodes far above chance."""
+    from hnsdt.compose.config import method_executor
+    from hnsdt.evaluation.validation import StepsToExit
+
+    settings = baseline_settings(params, "ppo", "keydoor", 0)
+    measure = StepsToExit.on_layouts([keydoor], 100, settings.train.starts, "ppo", method_executor(params, "ppo"),
+                                     {})
+    model, curve, usage = train_ppo(keydoor, 100, settings.model, settings.train, progress=False, measure=measure)
+    assert usage["env_steps"] <= settings.train.env_steps + 1024 and usage["gradient_steps"] > 100
+    assert usage["validation_steps"][-1]["value"] == measure.floor  # (the optimum's steps from the start)
+    assert curve[-1]["success"] > curve[0]["success"] and curve[-1]["entropy"] < curve[0]["entropy"]
+    assert _success(keydoor, PPOAgent(model)) >= 0.9 > random_success + 0.5
+
+
+@pytest.mark.learning
 def test_options_learns_to_cross_a_room(params):
     """Option-critic's learning signal: on an open 5x5 room with a 20-step horizon (uniform random actions reach
     the far corner in about 4% of episodes), two of three seeds learn to cross it in 10,000 env steps, and the
@@ -134,32 +155,53 @@ def test_options_learns_to_cross_a_room(params):
     assert sum(s >= 0.8 for s in successes) >= 2 and np.mean(successes) > random_success + 0.3, successes
 
 
-def _stack_or_alone(learner, layout, seeds):
-    """``learner`` (dqn / options) trained on seeds as one stack, and on each seed alone: (stacked, alone)
-    results, each a list of (model, curve, usage)."""
-    from hnsdt.models.view import ViewOptionCritic, ViewOptionCriticConfig
+ONLINE = ["dqn", "options", "ppo"]
 
+
+def _online(learner: str, layout, hidden: int, iteration: int, views: bool = False, **knobs):
+    """``learner``'s (network config, trainer, network class, config class) with ``hidden`` units and its share of
+    ``knobs``: the replay learners learn from 200 env steps on, PPO's iterations are ``iteration`` env steps of
+    its ``num_envs`` copies (its evaluations and curve rows fall at an iteration's end). ``views``: the learner's
+    view network on a list of generated layouts."""
+    from hnsdt.models import view
+
+    first = layout[0] if views else layout
+    grid = (first.n_flags, 0, 0) if views else (first.n_flags, *first.shape)
+    extra = {"options": {"n_options": 3}}.get(learner, {}) | ({"view_radius": 2} if views else {})
+    if learner == "ppo":
+        knobs = {k: v for k, v in knobs.items() if k not in ("learning_starts", "batch_size", "target_period")}
+        knobs["rollout_steps"] = iteration // knobs.setdefault("num_envs", 8)
+        knobs["minibatches"] = 4 if knobs["rollout_steps"] * knobs["num_envs"] % 4 == 0 else 1
+    net_cls, train, cfg_cls = {"dqn": (QNetworkConfig, train_dqn, DQNConfig),
+                               "options": (OptionCriticConfig, train_options, OptionsConfig),
+                               "ppo": (ActorCriticConfig, train_ppo, PPOConfig)}[learner]
+    network = {"dqn": QNetwork, "options": OptionCritic, "ppo": ActorCritic}[learner]
+    if views:
+        net_cls = getattr(view, "View" + net_cls.__name__)
+        network = getattr(view, "View" + network.__name__)
+    return net_cls(*grid, hidden=hidden, **extra), train, network, lambda **k: cfg_cls(**knobs, **k)
+
+
+def _stack_or_alone(learner, layout, seeds):
+    """``learner`` trained on seeds as one stack, and on each seed alone: (stacked, alone) results, each a list
+    of (model, curve, usage)."""
     # sizes that are no multiple of a vector's width: torch computes a tensor's last few elements on another code
     # path than the rest (option-critic's sigmoid rounds otherwise there), and a stack moves them
-    knobs = dict(env_steps=400, learning_starts=200, batch_size=37, num_envs=5, target_period=20)
-    if learner == "dqn":
-        net, train, network = QNetworkConfig(layout.n_flags, *layout.shape, hidden=13), train_dqn, QNetwork
-        cfgs = [DQNConfig(**knobs, seed=s) for s in seeds]
-    else:  # on views of generated maps, a new one at every reset
-        net = ViewOptionCriticConfig(layout[0].n_flags, 0, 0, hidden=13, n_options=3, view_radius=2)
-        train, network = train_options, ViewOptionCritic
-        cfgs = [OptionsConfig(**knobs, seed=s) for s in seeds]
+    net, train, network, config = _online(learner, layout, 13, 80, views=learner != "dqn", env_steps=400,
+                                          learning_starts=200, batch_size=37, num_envs=5, target_period=20)
+    cfgs = [config(seed=s) for s in seeds]
     stacked = train(layout, 30, net, cfgs, progress=False, network=network)
     return stacked, [train(layout, 30, net, cfg, progress=False, network=network) for cfg in cfgs]
 
 
-@pytest.mark.parametrize("learner", ["dqn", "options"])
+@pytest.mark.parametrize("learner", ONLINE)
 def test_seeds_trained_as_a_stack_get_the_bytes_each_gets_alone(keydoor, learner):
     """Stage `train_online` trains an online learner's seeds in lockstep, one stacked network per worker: each
     seed's weights and curve are those of its run alone, in whatever stack (three seeds, out of order)."""
     from hnsdt.envs.generate import generate
 
-    layout = keydoor if learner == "dqn" else [generate("keydoor_maze", s) for s in range(3)]
+    layout = keydoor if learner == "dqn" else [generate("keydoor_maze", s) for s in range(3)]  # (views: a new map
+    # at every reset)
     stacked, alone = _stack_or_alone(learner, layout, [2, 0, 1])
     for (a, curve_a, usage_a), (b, curve_b, usage_b) in zip(stacked, alone):
         assert list(a.state_dict()) == list(b.state_dict())
@@ -180,23 +222,21 @@ class _Scripted:
         return self.values[len(self.weights) - 1]
 
 
-def _weights_sum(net) -> float:
-    """A measure that follows the weights (deterministic, different for every seed's run)."""
-    return -float(sum(p.double().sum() for p in net.parameters()))
+def _weights_noise(net) -> float:
+    """A measure that follows the weights to their last bits (deterministic, unlike from one evaluation to the next
+    and from seed to seed: seeds stop at different evaluations, whichever way their weights drift)."""
+    return float(sum(p.double().sum() for p in net.parameters())) * 1e4 % 1.0
 
 
-@pytest.mark.parametrize("learner", ["dqn", "options"])
+@pytest.mark.parametrize("learner", ONLINE)
 def test_an_online_learner_stops_at_the_plateau_of_its_validation_and_keeps_the_best_weights(keydoor, learner):
     """Evaluated every 200 env steps: 5, 4, 3, 3.5, 3.2 with patience 2 -> the seed stops after the fifth
     evaluation (1,000 of 2,000 steps; its exploration ends at 1,000) with the third's weights, its curve and data
     used up to there. Fails when the rule is cut (it trains to the cap), keeps the last weights, or stops a seed
     still exploring short of the measure's floor."""
-    knobs = dict(env_steps=2000, learning_starts=200, log_every=200, patience=2, validate_every=200, seed=1)
-    if learner == "dqn":
-        net, train, cfg = QNetworkConfig(keydoor.n_flags, *keydoor.shape, hidden=16), train_dqn, DQNConfig(**knobs)
-    else:
-        net, train, cfg = (OptionCriticConfig(keydoor.n_flags, *keydoor.shape, hidden=16, n_options=2),
-                           train_options, OptionsConfig(**knobs))
+    net, train, _, config = _online(learner, keydoor, 16, 200, env_steps=2000, learning_starts=200, log_every=200,
+                                    patience=2, validate_every=200)
+    cfg = config(seed=1)
     measure = _Scripted([5.0, 4.0, 3.0, 3.5, 3.2] + [1.0] * 10)
     model, curve, usage = train(keydoor, 60, net, cfg, progress=False, measure=measure)
     assert [h["step"] for h in usage["validation_steps"]] == [200, 400, 600, 800, 1000]
@@ -219,19 +259,15 @@ def test_an_online_learner_stops_at_the_plateau_of_its_validation_and_keeps_the_
         train(keydoor, 60, net, cfg, progress=False)
 
 
-@pytest.mark.parametrize("learner", ["dqn", "options"])
+@pytest.mark.parametrize("learner", ONLINE)
 def test_seeds_that_stop_apart_in_a_stack_get_what_each_gets_alone(keydoor, learner):
     """Seeds stacked with a validation plateau stop at different evaluations; each one's weights, curve and data
     used are those of its run alone (a stopped seed trains on in the stack, unseen)."""
-    knobs = dict(env_steps=1200, learning_starts=200, log_every=100, patience=1, validate_every=100)
-    if learner == "dqn":
-        net, train = QNetworkConfig(keydoor.n_flags, *keydoor.shape, hidden=13), train_dqn
-        cfgs = [DQNConfig(**knobs, seed=s) for s in (2, 0, 1)]
-    else:
-        net, train = OptionCriticConfig(keydoor.n_flags, *keydoor.shape, hidden=13, n_options=3), train_options
-        cfgs = [OptionsConfig(**knobs, seed=s) for s in (2, 0, 1)]
-    stacked = train(keydoor, 30, net, cfgs, progress=False, measure=_weights_sum)
-    alone = [train(keydoor, 30, net, cfg, progress=False, measure=_weights_sum) for cfg in cfgs]
+    net, train, _, config = _online(learner, keydoor, 13, 100, env_steps=1200, learning_starts=200, log_every=100,
+                                    patience=3, validate_every=100)
+    cfgs = [config(seed=s) for s in (2, 0, 1)]
+    stacked = train(keydoor, 30, net, cfgs, progress=False, measure=_weights_noise)
+    alone = [train(keydoor, 30, net, cfg, progress=False, measure=_weights_noise) for cfg in cfgs]
     for (a, curve_a, usage_a), (b, curve_b, usage_b) in zip(stacked, alone):
         assert all(torch.equal(x, y) for x, y in zip(a.state_dict().values(), b.state_dict().values()))
         np.testing.assert_equal(curve_a, curve_b)  # (NaN before the first episode ends)
@@ -283,7 +319,8 @@ def test_options_agent_is_reproducible_with_its_seed(keydoor):
     assert all(np.array_equal(x.actions, y.actions) for x, y in zip(*runs))
 
 
-@pytest.mark.parametrize("network, config", [(QNetwork, QNetworkConfig), (OptionCritic, OptionCriticConfig)])
+@pytest.mark.parametrize("network, config", [(QNetwork, QNetworkConfig), (OptionCritic, OptionCriticConfig),
+                                             (ActorCritic, ActorCriticConfig)])
 def test_online_agents_compute_each_distinct_state_once_to_the_same_actions(keydoor, network, config):
     """An online learner's agent computes its network on the distinct states of the batch only (copies in one
     state share a row): every copy's outputs are the network's on the whole batch up to rounding (a row's last
@@ -316,15 +353,17 @@ def test_online_agents_compute_each_distinct_state_once_to_the_same_actions(keyd
     (lambda p: p["baselines"]["dqn"].update(lr="1e-3"), "baselines.dqn.lr must be float, got '1e-3'"),
     (lambda p: p["baselines"]["dqn"].update(fail_probs=[0.1, "x"]), "baselines.dqn.fail_probs"),
     (lambda p: p["baselines"]["options"].update(fail_probs=[2]), "baselines.options.fail_probs"),
-    (lambda p: p["baselines"].update(online=["dqn", "ppo"]), "baselines.online.1: Input should be 'dqn' or 'options', got 'ppo'"),
-    (lambda p: p["baselines"].update(online=["dqn"]), "['options'] are never trained"),
+    (lambda p: p["baselines"].update(online=["dqn", "sac"]),
+     "baselines.online.1: Input should be 'dqn', 'options' or 'ppo', got 'sac'"),
+    (lambda p: p["baselines"].update(online=["dqn", "ppo"]), "['options'] are never trained"),
+    (lambda p: p["baselines"]["ppo"].update(buffer_size=1000), "baselines.ppo: unknown keys ['buffer_size']"),
 ])
 def test_bad_baseline_params_give_one_clear_error(params, edit, message):
     raw = copy.deepcopy(params.raw)
     edit(raw)
     with pytest.raises(ParamsError, match=None) as err:
         p = validate(raw)
-        for method in ("dqn", "gru", "options"):
+        for method in ("dqn", "gru", "options", "ppo"):
             baseline_settings(p, method, "multikeydoor", 0)
         evaluate_settings(p)
     assert message in str(err.value)

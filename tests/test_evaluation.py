@@ -77,6 +77,28 @@ def test_seed_view_counts_solving_seeds_and_bootstraps_over_seeds():
     assert seed_view(pd.DataFrame(rows)).equals(seed_view(pd.DataFrame(rows)))  # seeded resampling
 
 
+def test_the_report_says_which_online_learners_never_reached_the_exit_in_training(tmp_path):
+    """A row at 0.000 on the maps a learner trains on comes with its measured reason: the seeds that never ended a
+    training episode at the exit are counted under the usage table, with the learner, the env and the budget."""
+    from hnsdt.report.tables import usage_lines
+
+    rows = [{"method": "ppo", "env": "multikeydoor", "seed": s, "training": "online", "env_steps": 150_528,
+             "gradient_steps": 2352, "env_steps_kept": 10_240, "training_exits": exits}
+            for s, exits in enumerate([0, 0, 3])]
+    rows += [{"method": "dqn", "env": "multikeydoor", "seed": 0, "training": "online", "env_steps": 120_000,
+              "gradient_steps": 29_500, "env_steps_kept": 120_000, "training_exits": 812},
+             {"method": "gru", "env": "multikeydoor", "seed": 0, "training": "dataset", "dataset_frames": 9000,
+              "epochs": 20.0, "gradient_steps": 300}]
+    pd.DataFrame(rows).to_csv(tmp_path / "training_usage.csv", index=False)
+    lines = usage_lines(tmp_path)
+    assert "| multikeydoor | PPO | the environment | 150,528 | – | – | 2,352 | 10,240 | 1 |" in lines
+    notes = [line for line in lines if line.startswith("- ")]
+    assert notes == ["- PPO on multikeydoor: 2 of its 3 seeds never ended a training episode at the exit in up to "
+                     "150,528 environment steps. With the step penalty its only reward until then, nothing it "
+                     "learns points to the exit: this row measures its exploration, not what it would learn from a "
+                     "success."]
+
+
 def test_the_report_revision_is_dirty_for_code_changes_not_for_the_lock_file(tmp_path):
     import subprocess
 

@@ -12,6 +12,7 @@ from hnsdt.agents.rollout import Agent
 from hnsdt.core.methods import METHODS, STAGES
 from hnsdt.implementations import CODE, code_of, resolve
 from hnsdt.models.checkpoint import architectures
+from tiny_repo import tiny_online
 
 PACKAGE = Path(__file__).resolve().parent.parent / "hnsdt"
 
@@ -71,7 +72,7 @@ def tiny(tmp_path_factory):
     for name in params["baselines"]["offline"]:
         params["baselines"][name].update(epochs=1, max_steps=2)
     for name in params["baselines"]["online"]:
-        params["baselines"][name].update(env_steps=64, learning_starts=32)
+        tiny_online(params["baselines"][name], env_steps=64, learning_starts=32, rollout_steps=4)
     params = validate(params)
     dataset = tmp_path_factory.mktemp("data") / "keydoor"
     collect_dataset(collect_config(params, "keydoor"), dataset, repo_id="local/keydoor", progress=False)

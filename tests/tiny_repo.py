@@ -42,6 +42,12 @@ def copy_repo(dst: Path) -> None:
         shutil.copy2(REPO / rel, dst / rel)
 
 
+def tiny_online(knobs: dict, **tiny) -> None:
+    """An online learner's ``knobs`` given those of ``tiny`` it has (replay learners: learning_starts; PPO:
+    rollout_steps)."""
+    knobs.update({k: v for k, v in tiny.items() if k in knobs or k == "env_steps"})
+
+
 def tiny_params(path: Path) -> None:
     """Every stage kind runs, each in seconds: Case 1 only (Case 2 runs the same stages with another layout),
     9 episodes, 1 seed, a few gradient / env steps, one process per stage."""
@@ -55,7 +61,7 @@ def tiny_params(path: Path) -> None:
     for method in params["baselines"]["offline"]:
         params["baselines"][method].update(epochs=1, max_steps=2)
     for method in params["baselines"]["online"]:
-        params["baselines"][method].update(env_steps=400, learning_starts=200)
+        tiny_online(params["baselines"][method], env_steps=400, learning_starts=200, rollout_steps=25)
     params["evaluate"].update(episodes=4, fail_probs=[0.0, 0.2])
     params["compute"]["workers"] = 1  # every stage in its own process: a pool's workers would each import torch
     # (≈ 2.5 s) for seconds of work, on cores the other test worker uses (pools: tests/test_train_cli.py)

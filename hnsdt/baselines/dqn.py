@@ -14,7 +14,7 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from hnsdt.baselines.online import (OnlineAgent, OnlineConfig, OnlineRun, finish, linear_schedule, seed_configs,
+from hnsdt.baselines.online import (OnlineAgent, OnlineRun, ReplayConfig, finish, linear_schedule, seed_configs,
                                     start_run)
 from hnsdt.envs.keydoor import N_ACTIONS
 from hnsdt.envs.layout import Layout
@@ -22,8 +22,8 @@ from hnsdt.models.qnetwork import QNetwork, QNetworkConfig
 
 
 @dataclass
-class DQNConfig(OnlineConfig):
-    """The shared online knobs (:class:`OnlineConfig`: budget, replay, target period, ε schedule), plus:"""
+class DQNConfig(ReplayConfig):
+    """The shared online knobs (:class:`ReplayConfig`: budget, replay, target period, ε schedule), plus:"""
 
     train_every: int = 4  # env steps per gradient step
 
@@ -88,11 +88,7 @@ class DQNAgent(OnlineAgent):
     """Greedy in Q (or ε-greedy with ``epsilon`` > 0, from the seeded generator)."""
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        actions = self.outputs(obs).argmax(-1).cpu().numpy()
-        if self.epsilon > 0:
-            explore = self.rng.random(len(obs)) < self.epsilon
-            actions = np.where(explore, self.rng.integers(0, N_ACTIONS, len(obs)), actions)
-        return actions
+        return self.epsilon_greedy(self.outputs(obs).argmax(-1).cpu().numpy())
 
 
 def make_agent(model, meta: dict, layout, executor, epsilon: float = 0.0, seed: int = 0) -> DQNAgent:

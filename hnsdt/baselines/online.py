@@ -13,6 +13,7 @@ import torch
 import torch.nn as nn
 
 from hnsdt.agents.rollout import distinct_rows
+from hnsdt.envs.keydoor import N_ACTIONS
 from hnsdt.envs.layout import Layout
 from hnsdt.envs.vector import KeyDoorVectorEnv, Streams
 from hnsdt.models.kernels import Linear
@@ -28,13 +29,8 @@ class OnlineConfig:
     fail_probs: tuple[float, ...] = (0.0, 0.1, 0.2, 0.3)  # the copies cycle through these
     lr: float = 5e-4  # Adam learning rate
     gamma: float = 0.99  # discount
-    buffer_size: int = 50_000  # replay capacity, in transitions
-    batch_size: int = 128  # replayed transitions per gradient step
-    learning_starts: int = 2_000  # env steps of exploration before learning from replay
-    target_period: int = 250  # gradient steps between target-network copies
-    epsilon_start: float = 1.0  # exploration ε at the start ...
-    epsilon_end: float = 0.05  # ... decays linearly to this ...
-    exploration_fraction: float = 0.5  # ... over this fraction of env_steps
+    exploration_fraction: float = 0.5  # the first fraction of env_steps, in which a seed explores and does not
+    #                                    stop at a plateau (DQN, option-critic: their ε decays over it)
     seed: int = 0
     device: str = "cpu"
     log_every: int = 2_000  # env steps between training-curve rows
@@ -45,6 +41,19 @@ class OnlineConfig:
     starts: int = 1  # with patience: about this many validation start states: the map's start, then random states
     #                  of it (which a learner from the start never visits); the unseen layouts': spread over the
     #                  validation layouts, each one's start first
+
+
+@dataclass
+class ReplayConfig(OnlineConfig):
+    """The shared online knobs, plus those of learning from a replay buffer under an ε-greedy schedule (DQN,
+    option-critic)."""
+
+    buffer_size: int = 50_000  # replay capacity, in transitions
+    batch_size: int = 128  # replayed transitions per gradient step
+    learning_starts: int = 2_000  # env steps of exploration before learning from replay
+    target_period: int = 250  # gradient steps between target-network copies
+    epsilon_start: float = 1.0  # exploration ε at the start ...
+    epsilon_end: float = 0.05  # ... decays linearly to this over exploration_fraction of env_steps
 
 
 def training_env(layout: Layout | list[Layout], max_steps: int, num_envs: int, fail_probs, view_radius: int = 0):
@@ -58,6 +67,14 @@ def training_env(layout: Layout | list[Layout], max_steps: int, num_envs: int, f
 
         return LayoutPoolVectorEnv(layout, num_envs, per_copy, max_steps, view_radius)
     return KeyDoorVectorEnv(num_envs, layout, per_copy, max_steps)
+
+
+def sample_categorical(logits: torch.Tensor, rng: np.random.Generator) -> np.ndarray:
+    """One draw per row from softmax(logits), with numpy's seeded generator."""
+    probs = torch.softmax(logits, -1).detach().cpu().numpy().astype(np.float64)
+    cum = probs.cumsum(-1)
+    u = rng.random(len(probs))[:, None] * cum[:, -1:]
+    return np.minimum((u > cum).sum(-1), probs.shape[1] - 1)
 
 
 def linear_schedule(start: float, end: float, duration: int, t: int) -> float:
@@ -94,13 +111,15 @@ class ReplayBuffer:
 
 
 class EpisodeStats:
-    """Running return, length and success of each copy; the finished episodes since the last curve row."""
+    """Running return, length and success of each copy; the finished episodes since the last curve row; how many
+    episodes have finished, and how many of them at the exit."""
 
     def __init__(self, n: int):
         self.ret = np.zeros(n)
         self.length = np.zeros(n, np.int64)
         self.finished: list[tuple[float, int, bool]] = []
         self.episodes = 0
+        self.exits = 0  # episodes that ended at the exit
 
     def update(self, rewards, terminated, done) -> None:
         self.ret += rewards
@@ -108,6 +127,7 @@ class EpisodeStats:
         for i in np.flatnonzero(done):
             self.finished.append((float(self.ret[i]), int(self.length[i]), bool(terminated[i])))
         self.episodes += int(done.sum())
+        self.exits += int((done & terminated).sum())
         self.ret[done], self.length[done] = 0.0, 0
 
     def row(self) -> dict:
@@ -137,6 +157,18 @@ def stack_networks(nets: list[nn.Module]) -> nn.Module:
         setattr(stacked.get_submodule(owner), attr,
                 nn.Parameter(torch.stack([net.get_parameter(name).detach() for net in nets])))
     return stacked
+
+
+def clip_seed_norms(stacked: nn.Module, max_norm: float) -> None:
+    """``torch.nn.utils.clip_grad_norm_`` for each network of a stack (:func:`stack_networks`) apart: seed i's
+    gradients (every parameter's slice i) scaled by min(1, max_norm / (their global norm + 1e-6)), each norm
+    summed slice by slice, as alone."""
+    grads = [p.grad for p in stacked.parameters() if p.grad is not None]
+    for i in range(len(grads[0]) if grads else 0):
+        norm = torch.linalg.vector_norm(torch.stack([torch.linalg.vector_norm(g[i]) for g in grads]))
+        scale = torch.clamp(max_norm / (norm + 1e-6), max=1.0)
+        for g in grads:
+            g[i].mul_(scale)
 
 
 def unstack_network(stacked: nn.Module, nets: list[nn.Module]) -> list[nn.Module]:
@@ -194,7 +226,7 @@ class OnlineRun:
     target: nn.Module  # a copy of ``net``, refreshed every ``target_period`` gradient steps
     opt: torch.optim.Optimizer
     obs: np.ndarray  # (seeds, copies, state)
-    buffers: list[ReplayBuffer]
+    buffers: list[ReplayBuffer] | None  # per seed (learners from replay: ReplayConfig)
     stats: list[EpisodeStats]
     grad_steps: int = 0
     losses: list[list[float]] = field(default_factory=list)  # per seed, since the last curve row
@@ -221,10 +253,11 @@ class OnlineRun:
         termination: its next state is bootstrapped) and counted. ``(next_obs, rewards, terminated, done)``,
         stacked; the finished copies restart at :meth:`restart`."""
         out = []
-        for i, (env, buffer, stats) in enumerate(zip(self.envs, self.buffers, self.stats)):
+        for i, (env, buffer, stats) in enumerate(zip(self.envs, self.buffers or [None] * len(self.envs), self.stats)):
             next_obs, rewards, terminated, truncated, _ = env.step(actions[i])
-            buffer.add(self.obs[i], actions[i], rewards, next_obs, terminated,
-                       options=None if options is None else options[i])
+            if buffer is not None:
+                buffer.add(self.obs[i], actions[i], rewards, next_obs, terminated,
+                           options=None if options is None else options[i])
             stats.update(rewards, terminated, terminated | truncated)
             out.append((next_obs, rewards, terminated, terminated | truncated))
         return tuple(np.stack(column) for column in zip(*out))
@@ -239,20 +272,23 @@ class OnlineRun:
         draws = [buffer.sample(batch_size) for buffer in self.buffers]
         return {k: torch.from_numpy(np.stack([d[k] for d in draws])).to(self.device) for k in draws[0]}
 
-    def learn(self, losses: torch.Tensor, target_period: int) -> None:
+    def learn(self, losses: torch.Tensor, target_period: int = 0, max_grad_norm: float = 0.0) -> None:
         """One Adam step on the seeds' ``losses`` (seeds,): their sum, whose gradient reaches each seed's
-        weights from its own loss alone; the target network copies the online one every ``target_period``
-        steps."""
+        weights from its own loss alone; with ``max_grad_norm``, each seed's gradient scaled down to that global
+        norm, its own (:func:`clip_seed_norms`); the target network copies the online one every
+        ``target_period`` steps."""
         self.opt.zero_grad(set_to_none=True)
         losses.sum().backward()
+        if max_grad_norm:
+            clip_seed_norms(self.net, max_grad_norm)
         self.opt.step()
         self.grad_steps += 1
         for seed_losses, value in zip(self.losses, losses.tolist()):
             seed_losses.append(value)
-        if self.grad_steps % target_period == 0:
+        if target_period and self.grad_steps % target_period == 0:
             self.target.load_state_dict(self.net.state_dict())
 
-    def curve_rows(self, steps: int, epsilon: float, extra: list[dict] | None = None) -> None:
+    def curve_rows(self, steps: int, epsilon: float | None, extra: list[dict] | None = None) -> None:
         """A training-curve row per seed: env steps, ε, the episodes finished and the mean loss since the last
         row, the seed's ``extra``, and with a plateau its validation value at this step (NaN between)."""
         for i, (curve, stats) in enumerate(zip(self.curves, self.stats)):
@@ -262,7 +298,8 @@ class OnlineRun:
                 history = self.plateaus[i].history
                 validation = {"validation_steps": history[-1]["value"] if history and history[-1]["step"] == steps
                               else float("nan")}
-            curve.append({"step": steps, "epsilon": round(epsilon, 4), **stats.row(),
+            explore = {} if epsilon is None else {"epsilon": round(epsilon, 4)}
+            curve.append({"step": steps, **explore, **stats.row(),
                           "loss": float(np.mean(losses)) if losses else float("nan"),
                           **(extra[i] if extra else {}), **validation})
             self.losses[i] = []
@@ -282,7 +319,8 @@ class OnlineRun:
         return self.plateaus is not None and all(p.stopped is not None for p in self.plateaus)
 
     def used(self, seed: int, steps: int) -> dict:
-        return {"env_steps": steps, "episodes": self.stats[seed].episodes, "gradient_steps": self.grad_steps}
+        return {"env_steps": steps, "episodes": self.stats[seed].episodes, "exits": self.stats[seed].exits,
+                "gradient_steps": self.grad_steps}
 
     def result(self, steps: int) -> list[tuple[torch.nn.Module, list[dict], dict]]:
         """The trainer's return per seed: its network (eval mode), its curve and the data it used; with a
@@ -332,7 +370,8 @@ def start_run(layout: Layout | list[Layout], max_steps: int, network: type, net_
     obs = np.stack(obs)
     floor = float(getattr(measure, "floor", float("-inf")))
     return OnlineRun(rngs, device, envs, nets, net, copy.deepcopy(net), Adam(net.parameters(), lr=cfg.lr), obs,
-                     [ReplayBuffer(cfg.buffer_size, obs.shape[-1], rng) for rng in rngs],
+                     [ReplayBuffer(cfg.buffer_size, obs.shape[-1], rng) for rng in rngs]
+                     if isinstance(cfg, ReplayConfig) else None,
                      [EpisodeStats(cfg.num_envs) for _ in cfgs], losses=[[] for _ in cfgs],
                      curves=[[] for _ in cfgs],
                      plateaus=[Plateau(cfg.patience, floor) for _ in cfgs] if cfg.patience else None)
@@ -369,6 +408,13 @@ class OnlineAgent:
             out = self.model(torch.from_numpy(states[first]).to(self.device))
         index = torch.from_numpy(inverse).to(self.device)
         return out[index] if isinstance(out, torch.Tensor) else tuple(part[index] for part in out)
+
+    def epsilon_greedy(self, greedy: np.ndarray) -> np.ndarray:
+        """``greedy`` actions, each replaced with probability ``epsilon`` by a uniformly random one (seeded)."""
+        if self.epsilon <= 0:
+            return greedy
+        explore = self.rng.random(len(greedy)) < self.epsilon
+        return np.where(explore, self.rng.integers(0, N_ACTIONS, len(greedy)), greedy)
 
     def reset(self, obs: np.ndarray) -> None:
         pass

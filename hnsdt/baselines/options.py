@@ -24,26 +24,18 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from hnsdt.baselines.online import (OnlineAgent, OnlineConfig, OnlineRun, finish, linear_schedule, seed_configs,
-                                    start_run)
+from hnsdt.baselines.online import (OnlineAgent, OnlineRun, ReplayConfig, finish, linear_schedule,
+                                    sample_categorical, seed_configs, start_run)
 from hnsdt.envs.layout import Layout
 from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig
 
 
 @dataclass
-class OptionsConfig(OnlineConfig):
-    """The shared online knobs (:class:`OnlineConfig`; ε is that of the policy over options), plus:"""
+class OptionsConfig(ReplayConfig):
+    """The shared online knobs (:class:`ReplayConfig`; ε is that of the policy over options), plus:"""
 
     termination_reg: float = 0.01  # ξ: margin that keeps options from terminating every step
     entropy_reg: float = 0.01  # entropy bonus of the intra-option policies
-
-
-def sample_categorical(logits: torch.Tensor, rng: np.random.Generator) -> np.ndarray:
-    """One draw per row from softmax(logits), with numpy's seeded generator."""
-    probs = torch.softmax(logits, -1).detach().cpu().numpy().astype(np.float64)
-    cum = probs.cumsum(-1)
-    u = rng.random(len(probs))[:, None] * cum[:, -1:]
-    return np.minimum((u > cum).sum(-1), probs.shape[1] - 1)
 
 
 def choose_options(q: torch.Tensor, epsilon: float, rng: np.random.Generator) -> np.ndarray:

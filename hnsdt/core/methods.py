@@ -43,6 +43,7 @@ METHODS = {m.name: m for m in (
     Method("gru", "GRU sequential", "RNN", **_RNN, fixed={"cell": "gru", "hierarchical": False}),
     Method("dqn", "DQN", "traditional RL", "online", "train_online", "q_learning"),
     Method("options", "Options (option-critic)", "traditional RL", "online", "train_online", "option_critic"),
+    Method("ppo", "PPO", "traditional RL", "online", "train_online", "policy_gradient"),
     Method("pure_dt", "Pure DT", "pure transformer", **_DT, condition="return"),
     Method("symbolic", "BFS + controllers", "symbolic", "none", "", "controllers"),
     Method("hnsdt", "HNSDT (ours)", "neuro-symbolic", **_DT, condition="subgoal"),

@@ -68,7 +68,8 @@ def training_usage(models_root: str | Path, env: str, method: str, seed: int) ->
             "env_steps": usage.get("env_steps"), "dataset_frames": usage.get("dataset_frames"),
             "epochs": usage.get("epochs"), "gradient_steps": usage.get("gradient_steps"),
             "epoch_kept": usage.get("best_epoch"),  # trained to a validation plateau: the epoch whose weights it
-            "env_steps_kept": usage.get("best_step")}  # kept (offline), or the env step (online)
+            "env_steps_kept": usage.get("best_step"),  # kept (offline), or the env step (online)
+            "training_exits": usage.get("exits")}  # online: training episodes that ended at the exit
 
 
 @dataclass(frozen=True)

@@ -1,6 +1,6 @@
-"""Value networks of the traditional-RL baselines: DQN's Q-network and the option-critic network.
+"""Networks of the traditional-RL baselines: DQN's Q-network, the option-critic network and PPO's actor-critic.
 
-States are small integer vectors (row, col, flags), so both read a one-hot encoding of row and column next to
+States are small integer vectors (row, col, flags), so each reads a one-hot encoding of row and column next to
 the flags and pass it through an MLP of ``n_layers`` × ``hidden`` ReLU units.
 """
 
@@ -97,3 +97,35 @@ def _sigmoid(x: torch.Tensor, stack_size: int) -> torch.Tensor:
     network: torch computes a tensor's last few elements on another code path than the rest, with other last bits,
     and each network must get the bytes it gets alone."""
     return torch.stack([torch.sigmoid(part) for part in x]) if stack_size else torch.sigmoid(x)
+
+
+@dataclass
+class ActorCriticConfig:
+    n_flags: int
+    grid_h: int
+    grid_w: int
+    hidden: int = 128
+    n_layers: int = 2
+
+
+class ActorCritic(StateFeatures, Network, arch="actor_critic", config=ActorCriticConfig):
+    """PPO's network, after CleanRL's ``ppo.py``: separate actor and critic MLPs over the same features, their
+    layers initialised orthogonally (gain √2; the policy head 0.01, so that the first policy is near uniform; the
+    value head 1)."""
+
+    def __init__(self, cfg: ActorCriticConfig):
+        super().__init__(cfg)
+        self.actor = mlp(self.n_inputs(cfg), cfg.hidden, cfg.n_layers)
+        self.policy_head = Linear(cfg.hidden, N_ACTIONS)
+        self.critic = mlp(self.n_inputs(cfg), cfg.hidden, cfg.n_layers)
+        self.value_head = Linear(cfg.hidden, 1)
+        for module in self.modules():
+            if isinstance(module, Linear):
+                gain = 0.01 if module is self.policy_head else 1.0 if module is self.value_head else 2 ** 0.5
+                nn.init.orthogonal_(module.weight, gain)
+                nn.init.zeros_(module.bias)
+
+    def forward(self, states: torch.Tensor):
+        """Policy logits (B, 5), state values (B,)."""
+        x = self.features(states)
+        return self.policy_head(self.actor(x)), self.value_head(self.critic(x)).squeeze(-1)

@@ -28,7 +28,8 @@ from hnsdt.envs.observation import N_CODES, view_states
 from hnsdt.models.dt import DecisionTransformer, DTConfig
 from hnsdt.models.kernels import Linear
 from hnsdt.models.plan import MapPlanner, taps
-from hnsdt.models.qnetwork import OptionCritic, OptionCriticConfig, QNetwork, QNetworkConfig
+from hnsdt.models.qnetwork import (ActorCritic, ActorCriticConfig, OptionCritic, OptionCriticConfig, QNetwork,
+                                   QNetworkConfig)
 from hnsdt.models.recurrent import RecurrentConfig, RecurrentPolicy
 
 
@@ -378,6 +379,18 @@ class ViewOptionCriticConfig(OptionCriticConfig):
 
 
 class ViewOptionCritic(ViewModel, OptionCritic, arch="view_option_critic", config=ViewOptionCriticConfig):
+    n_inputs = staticmethod(ViewQNetwork.n_inputs)
+
+    def features(self, states: torch.Tensor) -> torch.Tensor:
+        return one_hot_view(states, self.cfg.view_radius)
+
+
+@dataclass
+class ViewActorCriticConfig(ActorCriticConfig):
+    view_radius: int = 2
+
+
+class ViewActorCritic(ViewModel, ActorCritic, arch="view_actor_critic", config=ViewActorCriticConfig):
     n_inputs = staticmethod(ViewQNetwork.n_inputs)
 
     def features(self, states: torch.Tensor) -> torch.Tensor:

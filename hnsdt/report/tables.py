@@ -50,26 +50,34 @@ def paper_target_lines(summ: pd.DataFrame) -> list[str]:
 def usage_lines(results: Path) -> list[str]:
     """What each learned method trained on (mean over seeds): env steps (online) or dataset frames, the passes
     over its training data (epochs), gradient steps and, stopped by a validation measure, the epoch (offline) or
-    environment step (online) kept."""
+    environment step (online) kept; for an online learner, how many of its training episodes ended at the exit,
+    and below the table each online learner that never reached the exit in training, with what that means."""
     path = results / "training_usage.csv"
     if not path.is_file():
         return []
     u = pd.read_csv(path)
     if u.empty:
         return []
-    for column in ("epochs", "epoch_kept", "env_steps_kept"):
+    for column in ("epochs", "epoch_kept", "env_steps_kept", "training_exits"):
         if column not in u:
             u[column] = float("nan")
     lines = ["| env | method | trains on | environment steps | dataset frames | epochs | gradient steps | "
-             "epoch or step kept |", "|---|---|---|---|---|---|---|---|"]
+             "epoch or step kept | training episodes at the exit |", "|---|---|---|---|---|---|---|---|---|"]
     order = {m: i for i, m in enumerate(METHODS)}
     g = u.groupby(["env", "method", "training"], as_index=False)[["env_steps", "dataset_frames", "epochs",
                                                                   "gradient_steps", "epoch_kept",
-                                                                  "env_steps_kept"]].mean()
+                                                                  "env_steps_kept", "training_exits"]].mean()
     g = g.sort_values(["env", "method"], key=lambda c: c.map(order) if c.name == "method" else c)
     for r in g.itertuples():
         lines.append(f"| {r.env} | {label(r.method)} | {'the environment' if r.training == 'online' else 'the dataset'}"
                      f" | {fmt(r.env_steps, ',.0f')} | {fmt(r.dataset_frames, ',.0f')} | "
                      f"{fmt(r.epochs, '.1f')} | {fmt(r.gradient_steps, ',.0f')} | "
-                     f"{fmt(r.epoch_kept, '.1f') if pd.notna(r.epoch_kept) else fmt(r.env_steps_kept, ',.0f')} |")
-    return lines
+                     f"{fmt(r.epoch_kept, '.1f') if pd.notna(r.epoch_kept) else fmt(r.env_steps_kept, ',.0f')} | "
+                     f"{fmt(r.training_exits, ',.0f')} |")
+    never = u[u.training == "online"].groupby(["env", "method"], sort=False).agg(
+        seeds=("seed", "size"), blind=("training_exits", lambda x: int((x == 0).sum())), steps=("env_steps", "max"))
+    notes = [f"- {label(method)} on {env}: {r.blind:.0f} of its {r.seeds:.0f} seeds never ended a training episode at the "
+             f"exit in up to {r.steps:,.0f} environment steps. With the step penalty its only reward until then, "
+             "nothing it learns points to the exit: this row measures its exploration, not what it would learn "
+             "from a success." for (env, method), r in never[never.blind > 0].iterrows()]
+    return lines + ([""] + notes if notes else [])
