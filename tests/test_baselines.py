@@ -214,8 +214,8 @@ def test_seeds_trained_as_a_stack_get_the_bytes_each_gets_alone(keydoor, learner
 class _Scripted:
     """A validation measure that hands out ``values`` in turn and keeps each evaluated network's weights."""
 
-    def __init__(self, values, floor=float("-inf")):
-        self.values, self.weights, self.floor = list(values), [], floor
+    def __init__(self, values, floor=float("-inf"), ceiling=float("inf")):
+        self.values, self.weights, self.floor, self.ceiling = list(values), [], floor, ceiling
 
     def __call__(self, net) -> float:
         self.weights.append({k: v.clone() for k, v in net.state_dict().items()})
@@ -233,7 +233,7 @@ def test_an_online_learner_stops_at_the_plateau_of_its_validation_and_keeps_the_
     """Evaluated every 200 env steps: 5, 4, 3, 3.5, 3.2 with patience 2 -> the seed stops after the fifth
     evaluation (1,000 of 2,000 steps; its exploration ends at 1,000) with the third's weights, its curve and data
     used up to there. Fails when the rule is cut (it trains to the cap), keeps the last weights, or stops a seed
-    still exploring short of the measure's floor."""
+    still exploring, or one that has never reached the exit, short of the measure's floor."""
     net, train, _, config = _online(learner, keydoor, 16, 200, env_steps=2000, learning_starts=200, log_every=200,
                                     patience=2, validate_every=200)
     cfg = config(seed=1)
@@ -252,6 +252,9 @@ def test_an_online_learner_stops_at_the_plateau_of_its_validation_and_keeps_the_
     # ... nor while it explores: flat from the start, it stops once ε has decayed (1,000 steps), not at 600
     _, _, usage = train(keydoor, 60, net, cfg, progress=False, measure=_Scripted([5.0] * 10))
     assert usage["env_steps"] == 1000 and usage["best_step"] == 200
+    # ... nor while it has never reached the exit (every evaluation at the measure's ceiling): to the cap
+    _, _, usage = train(keydoor, 60, net, cfg, progress=False, measure=_Scripted([5.0] * 10, ceiling=5.0))
+    assert usage["env_steps"] == 2000 and not usage["stopped_early"]
     # ... but at the measure's floor (the optimum's steps) at once, exploring or not: nothing could replace it
     _, _, usage = train(keydoor, 60, net, cfg, progress=False, measure=_Scripted([5.0, 3.0] + [1.0] * 8, floor=3.0))
     assert usage["env_steps"] == 400 and usage["best_step"] == 400

@@ -124,7 +124,7 @@ def test_the_report_revision_is_dirty_for_code_changes_not_for_the_lock_file(tmp
 
 def test_the_headline_metrics_are_few_and_are_means_over_the_failure_probabilities():
     """`dvc metrics show` reads metrics/headline/ (a file per split): every method's success on each paper env
-    and unseen split, HNSDT's steps / optimum, each the mean over fail_probs of the seed means; at most ~40 numbers with
+    and unseen split, HNSDT's steps / optimum, each the mean over fail_probs of the seed means; at most ~45 numbers with
     the default methods (the planners that learn nothing are left to the report)."""
     import json
 
@@ -137,7 +137,7 @@ def test_the_headline_metrics_are_few_and_are_means_over_the_failure_probabiliti
                            for split in ("train", "heldout", "minigrid", "drawn") for fp in (0.0, 0.2)])
     head = headline_metrics(summ, unseen)
     numbers = [v for split in head.values() for v in split.values()]
-    assert len(numbers) <= 40 and set(head) == {"keydoor", "multikeydoor", "heldout", "minigrid", "drawn"}
+    assert len(numbers) <= 45 and set(head) == {"keydoor", "multikeydoor", "heldout", "minigrid", "drawn"}
     cells = summ[(summ.env == "multikeydoor") & (summ.method == "hnsdt_paper")]
     assert head["multikeydoor"]["hnsdt_paper"] == round(cells.success_mean.mean(), 4)
     assert head["heldout"] == {m: 0.6 for m in ("hnsdt", "pure_dt", "lstm_hier", "gru", "dqn", "options")} | {

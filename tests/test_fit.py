@@ -261,6 +261,34 @@ def test_validation_stops_at_the_plateau_and_keeps_the_best_epoch(frames, keydoo
         assert torch.equal(value, snapshots[2][name]), name
 
 
+def test_a_learner_that_never_reached_the_exit_is_at_no_plateau(frames, keydoor):
+    """A measure at its ceiling (every validation start failed: the step limit) in every epoch so far does not
+    stop training on patience: 100, 100, 100, then 60, 70, 80 with patience 2 runs on past epoch 3 and stops
+    after epoch 6 (the weights of 4). Fails when the ceiling rule is cut (it stops after epoch 3)."""
+    from hnsdt.models.fit import Validation
+
+    class Steps:
+        ceiling = 100.0
+
+        def __init__(self):
+            self.values = iter([100.0, 100.0, 100.0, 60.0, 70.0, 80.0, 50.0])
+
+        def __call__(self, model):
+            return next(self.values)
+
+    cfg = DTConfig("return", keydoor.n_flags, *keydoor.shape, context=4, n_layers=1, d_model=32, max_timestep=100,
+                   formulation="episode")
+    validation = Validation(Steps(), patience=2)
+    train_dt(frames, cfg, TrainConfig(epochs=10, batch_size=32, seed=2), progress=False, validation=validation)
+    assert [h["epoch"] for h in validation.history] == [1, 2, 3, 4, 5, 6] and validation.best_epoch == 4
+    # ... and at its ceiling throughout, it trains to the cap
+    always = Steps()
+    always.values = iter([100.0] * 5)
+    validation = Validation(always, patience=2)
+    train_dt(frames, cfg, TrainConfig(epochs=5, batch_size=32, seed=2), progress=False, validation=validation)
+    assert len(validation.history) == 5 and not validation.stopped_early
+
+
 def test_a_measure_at_its_floor_ends_training_at_once_with_the_weights_a_longer_run_keeps(frames, keydoor):
     """A measure that reaches its floor (no model can do better: the optimum's steps) stops after that epoch,
     keeping the weights the patience rule would have kept after more epochs."""

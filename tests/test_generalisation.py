@@ -937,7 +937,8 @@ def test_an_offline_baselines_patience_stops_it_on_the_validation_layouts(tmp_pa
     """``generalisation.budgets.<offline baseline>.patience``: the LSTM measures its steps to the exit on the
     validation layouts after every epoch, stops once they have not improved for ``patience`` epochs (``epochs``
     the cap) and keeps the best epoch's weights, whose measure is the history's best. Without validation
-    layouts, or set for the paper protocol (which has none), patience is one line naming the knob."""
+    layouts patience is one line naming the knob; on a paper map it measures from the map's start and random
+    states of it."""
     from hnsdt.compose import generalisation as gen
     from hnsdt.compose.config import ParamsError
     from hnsdt.compose.training import plan_runs, train_run
@@ -953,15 +954,20 @@ def test_an_offline_baselines_patience_stops_it_on_the_validation_layouts(tmp_pa
     history = [h["value"] for h in usage["validation_steps"]]
     best = int(np.argmin(history))
     assert usage["best_epoch"] == best + 1 and 1 <= len(history) <= 6
-    assert usage["stopped_early"] == (len(history) < 6) and (len(history) == 6 or len(history) == best + 2)
+    if history[best] < run.measure.ceiling:  # it has reached the exit: it stops at its plateau
+        assert usage["stopped_early"] == (len(history) < 6) and (len(history) == 6 or len(history) == best + 2)
+    else:  # never: no plateau (it ends at the epoch or step cap)
+        assert not usage["stopped_early"]
     assert run.measure(model) == history[best]  # the kept weights are the best epoch's
     params["generalisation"]["validation_layouts"] = 0
     with pytest.raises(ParamsError, match=r"generalisation.budgets.lstm_hier.patience .*validation_layouts > 0"):
         plan_unseen(validate(params), "lstm_hier", dataset)
-    params["baselines"]["lstm_hier"]["patience"] = 2
+    # the paper protocol: the greedy steps to the exit from the map's start, and random states of it (starts)
+    params["baselines"]["lstm_hier"].update(patience=2, starts=3)
     params["baselines"]["offline"] = ["lstm_hier"]
-    with pytest.raises(ParamsError, match=r"baselines.lstm_hier.patience stops on validation layouts"):
-        plan_runs(validate(params), "keydoor", "lstm_hier", [0], dataset)
+    (run,) = plan_runs(validate(params), "keydoor", "lstm_hier", [0], dataset)
+    (course,) = run.measure.courses
+    assert len(course.starts) == 3 and run.measure.ceiling == course.max_steps
 
 
 def test_an_online_learners_patience_stops_it_on_validation_starts_of_its_maps(tmp_path):

@@ -61,7 +61,7 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     learned = {m for m, entry in METHODS.items() if entry.training != "none"}
     assert set(headline) == {"keydoor", "heldout", "minigrid", "drawn", *(f"{e}.heldout" for e in EXPERIMENTS)}
     assert "symbolic" not in headline["keydoor"]
-    assert sum(len(split) for split in headline.values()) <= 40 and set(headline["keydoor"]) >= learned
+    assert sum(len(split) for split in headline.values()) <= 45 and set(headline["keydoor"]) >= learned
     printed = run(["dvc", "metrics", "show"], repo_copy)  # as the README shows it: a row per split, within 200
     assert "metrics/headline/keydoor.json" in printed and max(map(len, printed.splitlines())) <= 200, printed
     for name in ("summary.csv", "metrics.json"):  # the git-tracked copies the README's table is made from

@@ -185,12 +185,14 @@ class Plateau:
     """One seed's training to the plateau of a validation measure (``OnlineConfig.patience``; lower is better,
     e.g. :class:`hnsdt.evaluation.validation.StepsToExit`): its evaluations, the best one's weights, and what the
     seed had used when it stopped — it stops once ``patience`` evaluations bring no better value, but not while
-    it still explores (ε above its end: a seed that has never reached the exit is not at a plateau), or as soon
-    as one reaches the measure's ``floor`` (no model does better: no later one could replace it). Seeds in a
-    stack stop apart; a stopped seed's weights go on training beside the others but are not its result."""
+    it still explores (ε above its end), nor while every evaluation has had the measure's ``ceiling`` (a seed
+    that has never reached the exit greedily is not at a plateau), or as soon as one reaches the measure's
+    ``floor`` (no model does better: no later one could replace it). Seeds in a stack stop apart; a stopped
+    seed's weights go on training beside the others but are not its result."""
 
     patience: int
     floor: float
+    ceiling: float = float("inf")
     history: list[dict] = field(default_factory=list)  # {"step", "value"} per evaluation
     best: tuple | None = None  # (value, evaluation index, step, weights) of the best evaluation so far
     stopped: dict | None = None  # the data used when it stopped (env steps, episodes, gradient steps)
@@ -200,7 +202,9 @@ class Plateau:
         if self.best is None or value < self.best[0]:
             self.best = (value, len(self.history) - 1, steps,
                          {k: v.detach().cpu().clone() for k, v in net.state_dict().items()})
-        if value <= self.floor + 1e-9 or (may_stop and len(self.history) - 1 - self.best[1] >= self.patience):
+        waited = len(self.history) - 1 - self.best[1] >= self.patience
+        reached = self.best[0] < self.ceiling - 1e-9  # (some evaluation has reached the exit)
+        if value <= self.floor + 1e-9 or (may_stop and reached and waited):
             self.stopped = used  # (at the floor at once: no later evaluation could replace it)
 
     def record(self, name: str = "steps") -> dict:
@@ -368,13 +372,13 @@ def start_run(layout: Layout | list[Layout], max_steps: int, network: type, net_
         obs.append(envs[-1].reset(seed=c.seed)[0])
     net = stack_networks(nets)
     obs = np.stack(obs)
-    floor = float(getattr(measure, "floor", float("-inf")))
+    floor, ceiling = (float(getattr(measure, k, d)) for k, d in (("floor", float("-inf")), ("ceiling", float("inf"))))
     return OnlineRun(rngs, device, envs, nets, net, copy.deepcopy(net), Adam(net.parameters(), lr=cfg.lr), obs,
                      [ReplayBuffer(cfg.buffer_size, obs.shape[-1], rng) for rng in rngs]
                      if isinstance(cfg, ReplayConfig) else None,
                      [EpisodeStats(cfg.num_envs) for _ in cfgs], losses=[[] for _ in cfgs],
                      curves=[[] for _ in cfgs],
-                     plateaus=[Plateau(cfg.patience, floor) for _ in cfgs] if cfg.patience else None)
+                     plateaus=[Plateau(cfg.patience, floor, ceiling) for _ in cfgs] if cfg.patience else None)
 
 
 def finish(run: OnlineRun, steps: int, cfg, **loop):

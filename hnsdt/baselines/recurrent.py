@@ -33,9 +33,10 @@ class RecurrentTrainConfig:
     behaviours: tuple[str, ...] = ()  # collection behaviours to learn from (empty = all)
     symmetries: int = 1  # each episode, every epoch anew, on its map turned at random (view networks only;
     #                      hnsdt.models.view.turned_maps)
-    patience: int = 0  # > 0: stop once the steps to the exit on validation layouts (the unseen-layout
-    #                    experiment's; hnsdt.evaluation.validation.StepsToExit) have not improved for this many
-    #                    epochs, keeping the best epoch's weights; `epochs` is then the cap. 0: train every epoch
+    patience: int = 0  # > 0: stop once the greedy steps to the exit from validation start states (the unseen
+    #                    layouts': their validation layouts'; a paper map's: its start and random states of it;
+    #                    hnsdt.evaluation.validation.StepsToExit) have not improved for this many epochs, keeping the
+    #                    best epoch's weights; `epochs` is then the cap. 0: train every epoch
     starts: int = 64  # with patience: about this many start states, spread over the validation layouts
 
 
@@ -72,8 +73,8 @@ def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTr
     if len(starts) == 0:
         raise ValueError(f"no training episodes from behaviours {list(cfg.behaviours) or 'any'} in the dataset")
     if cfg.patience and measure is None:
-        raise ValueError("patience > 0 stops on the steps to the exit on validation layouts, which only the "
-                         "unseen-layout experiment has (generalisation.validation_layouts)")
+        raise ValueError("patience > 0 stops on the steps to the exit from validation start states: the trainer "
+                         "needs that measure")
     validation = Validation(measure, cfg.patience) if cfg.patience else None
     per_epoch = int(np.ceil(len(starts) / cfg.batch_size))
     objective = Objective(

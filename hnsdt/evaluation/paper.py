@@ -197,9 +197,9 @@ def _write_tables(tmp: Path, results: list, settings, envs: dict, groups: list, 
         pd.DataFrame(counts, columns=["env", "operator", "segments"]).to_csv(tmp / "training_segments.csv",
                                                                            index=False)
         pd.DataFrame(usage, columns=["method", "env", "seed", "training", "env_steps", "dataset_frames", "epochs",
-                                     "gradient_steps", "epoch_kept", "env_steps_kept"]).astype(
+                                     "gradient_steps", "epoch_kept", "env_steps_kept", "training_exits"]).astype(
             {"env_steps": "Int64", "dataset_frames": "Int64", "epochs": "float64", "gradient_steps": "Int64",
-             "epoch_kept": "Int64", "env_steps_kept": "Int64"}).to_csv(
+             "epoch_kept": "Int64", "env_steps_kept": "Int64", "training_exits": "Int64"}).to_csv(
             tmp / "training_usage.csv", index=False)
         (tmp / "model_parameters.json").write_text(json.dumps(params_count, indent=2, sort_keys=True) + "\n")
         summ = add_optimum(summary(table), envs)

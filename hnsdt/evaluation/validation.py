@@ -29,7 +29,8 @@ class StepsToExit:
     drawn from the held-out episodes of the method's map (:meth:`from_held_out`), or on validation layouts no
     training episode saw (:meth:`on_layouts`, the unseen-layout experiment). Deterministic: greedy agents, no
     failures. Its ``floor`` is the exact optimum's mean from the same states: no model can do better, so a
-    model that reaches it ends training (:class:`hnsdt.models.fit.Validation`)."""
+    model that reaches it ends training (:class:`hnsdt.models.fit.Validation`); its ``ceiling`` that of a model
+    that never reaches the exit."""
 
     method: str
     executor: Any  # the method's ExecutorConfig
@@ -42,6 +43,13 @@ class StepsToExit:
         from hnsdt.envs.oracle import mdp_for
 
         return float(np.mean(np.concatenate([mdp_for(c.layout).fewest_steps(c.starts, c.max_steps)
+                                             for c in self.courses])))
+
+    @property
+    def ceiling(self) -> float:
+        """The value of a model that reaches the exit from no start: every start's step limit. A model whose
+        evaluations all had it is at no plateau (:class:`hnsdt.models.fit.Validation`)."""
+        return float(np.mean(np.concatenate([np.full(len(c.starts), c.max_steps, np.float64)
                                              for c in self.courses])))
 
     @classmethod

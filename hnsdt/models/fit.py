@@ -45,7 +45,9 @@ class Validation:
     eval mode, it must not draw random numbers) is recorded in ``history``; once it has not improved for
     ``patience`` epochs training stops, and the model is the best epoch's (``best_epoch``). The epochs
     :func:`fit` is given are the cap. A measure with a ``floor`` (the best value any model can have, e.g. the
-    optimum's steps) stops training as soon as an epoch reaches it: later epochs could not replace it."""
+    optimum's steps) stops training as soon as an epoch reaches it: later epochs could not replace it. A measure
+    with a ``ceiling`` (the value of a model that never reaches the exit) does not stop on patience while every
+    epoch has had it: a learner that has never reached the exit is not at a plateau."""
 
     measure: Callable[[torch.nn.Module], float]
     patience: int
@@ -53,9 +55,11 @@ class Validation:
     best_epoch: int = 0
     stopped_early: bool = False
     floor: float = field(init=False)
+    ceiling: float = field(init=False)
 
     def __post_init__(self):
         self.floor = float(getattr(self.measure, "floor", float("-inf")))
+        self.ceiling = float(getattr(self.measure, "ceiling", float("inf")))
 
     def record(self, name: str) -> dict:
         """What a checkpoint's usage says of the budget the evidence chose; the measure's values as
@@ -175,7 +179,8 @@ def fit(network: type, model_cfg, objective: Objective, *, epochs: int, max_step
             validation.history.append({"epoch": epoch + 1, "step": step, "value": value})
             if best is None or value < best[0]:
                 best = (value, epoch + 1, {k: v.detach().cpu().clone() for k, v in model.state_dict().items()})
-            if value <= validation.floor + 1e-9 or epoch + 1 - best[1] >= validation.patience:
+            reached = best[0] < validation.ceiling - 1e-9  # (some epoch has reached the exit)
+            if value <= validation.floor + 1e-9 or (reached and epoch + 1 - best[1] >= validation.patience):
                 validation.stopped_early = True
                 break
     bar.close()

@@ -15,6 +15,7 @@ from hnsdt.core.methods import PAPER_ARM, PARADIGMS, PROPOSED
 from hnsdt.core.provenance import git_revision, params_digest
 from hnsdt.report.claims import BOOTSTRAP, SOLVED, claim_lines, paper_claims, seed_lines, seed_view
 from hnsdt.report.common import label, lock_outputs, render_template
+from hnsdt.report.curves import curve_lines, curves_figure, histories, trained_methods
 from hnsdt.report.figures import comparison_figure, environment_figure, heatmap_figure, paradigm_figure, regret_figure
 from hnsdt.report.headline import headline_metrics, write_headline
 from hnsdt.report.paper_arm import paper_arm_lines
@@ -55,6 +56,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
         if has_optimum:
             regret_figure(summ, tmp / "figures" / "regret.png")
         outs = lock_outputs(lock_path)
+        curves, curve_figures = learning_curves(outs, Path(lock_path).parent, tmp / "figures")
         inputs = {p: md5 for p, md5 in sorted(outs.items())
                   if p.startswith(("data/", "models/", "generalisation/dataset", "generalisation/models/"))}
         unseen = {}
@@ -89,6 +91,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             arms=arms, paper_claims=paper_claims_lines, paper_hnsdt=label(PAPER_ARM[PROPOSED]),
             paper_pure_dt=", ".join(label(m) for m in paper_pure_dt),
             seeds_table=seed_lines(view), solved=f"{SOLVED:.0%}", bootstrap=f"{BOOTSTRAP:,}", usage=usage,
+            curves=curves, curve_figures=curve_figures,
             numbers=results_table(numbers), recorded=len(recorded),
             example_episode=recorded.episode_id.iloc[0] if len(recorded) else "",
             generalisation=bool(unseen), **unseen, **variants, experiments=further)
@@ -105,3 +108,20 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             further_summaries = {e["name"]: e["summary"] for e in further}
             write_headline(headline_metrics(summ, unseen_summary, further_summaries), headline)
     return out / "report.md"
+
+
+def learning_curves(outs: dict[str, str], root: Path, figures: Path) -> tuple[list[str], list[tuple[str, str]]]:
+    """The learned methods' validation curves from their checkpoints — the paper protocol's per env
+    (``models/ENV``), the unseen layouts' (``generalisation/models``), as the lock lists them: the lines under the
+    figures and (experiment, figure file) per experiment with a curve."""
+    folders = dict.fromkeys(str(Path(p).parent) for p in sorted(outs) if p.startswith("models/"))
+    checkpoints = {Path(f).name: root / f for f in folders}
+    if any(p.startswith("generalisation/models/") for p in outs):
+        checkpoints["unseen layouts"] = root / "generalisation/models"
+    h = histories(checkpoints)
+    made = []
+    for experiment in dict.fromkeys(h.experiment):
+        name = f"learning_{experiment.replace(' ', '_')}.png"
+        curves_figure(h, experiment, figures / name)
+        made.append((experiment, name))
+    return curve_lines(h, trained_methods(checkpoints)), made
