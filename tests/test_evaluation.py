@@ -183,3 +183,41 @@ def test_a_methods_cells_stepped_as_one_batch_are_the_cells_run_alone(keydoor, m
     assert len({e.states.tobytes() for e in together}) > 3  # the draws matter: the episodes differ
     rows = cell_outputs(task, batch, together)
     assert [r[0][0]["episode_id"] for r in rows] == [f"{method}/keydoor/fp{fp:g}/seed0/ep0" for fp in (0, 0.2, 0.3)]
+
+
+def test_the_learning_curves_come_from_the_checkpoints_with_the_kept_evaluation_marked(tmp_path):
+    """The report's learning curves: every seed's recorded evaluations, the one it kept, whether it stopped
+    before the cap; methods without a validation history named as trained to a fixed budget; an online learner
+    whose seeds hardly ever reached the exit in training named with its counts. Each experiment's figure is
+    written."""
+    import json
+
+    from hnsdt.report.curves import curve_lines, curves_figure, histories, trained_methods, training_exits
+
+    def checkpoint(method, seed, usage):
+        folder = tmp_path / "models/keydoor" / method / f"seed{seed}"
+        folder.mkdir(parents=True)
+        (folder / "config.json").write_text(json.dumps({"usage": usage}))
+
+    for seed in (0, 1):
+        checkpoint("ppo", seed, {"env_steps": 30_000, "episodes": 300, "exits": seed, "stopped_early": seed == 0,
+                                 "best_step": 10_000 * (1 + seed), "validation_floor": 14.0,
+                                 "validation_steps": [{"step": 10_000, "value": 40.0},
+                                                      {"step": 20_000, "value": 30.0 + 20 * (1 - seed)},
+                                                      {"step": 30_000, "value": 35.0}]})
+        checkpoint("hnsdt", seed, {"best_epoch": 2, "stopped_early": True,
+                                   "validation_loss": [{"epoch": e, "step": 10 * e, "value": 1.0 / e} for e in (1, 2)]})
+        checkpoint("gru", seed, {"epochs": 20.0})
+    roots = {"keydoor": tmp_path / "models/keydoor"}
+    h = histories(roots)
+    kept = h[h.kept].sort_values(["method", "seed"])
+    assert list(zip(kept.method, kept.seed, kept.x)) == [("hnsdt", 0, 2), ("hnsdt", 1, 2), ("ppo", 0, 10_000),
+                                                         ("ppo", 1, 20_000)]
+    assert set(h[h.method == "ppo"].unit) == {"environment steps"} and set(h[h.method == "hnsdt"].unit) == {"epochs"}
+    lines = curve_lines(h, trained_methods(roots), training_exits(roots))
+    assert lines[0].startswith("- keydoor: seeds stopped at their plateau before the cap: PPO 1 of 2, HNSDT (ours) 2")
+    assert lines[0].endswith("(no curve): GRU sequential.")
+    assert lines[1] == ("  - PPO: 0–1 of its 300 training episodes a seed ended at the exit in up to 30,000 "
+                        "environment steps: too few successes to learn the way from within this cap.")
+    curves_figure(h, "keydoor", tmp_path / "curves.png")
+    assert (tmp_path / "curves.png").stat().st_size > 5_000

@@ -86,9 +86,23 @@ def curves_figure(h: pd.DataFrame, experiment: str, path: Path) -> None:
     plt.close(fig)
 
 
-def curve_lines(h: pd.DataFrame, trained: dict[str, list[str]]) -> list[str]:
+def training_exits(checkpoints: dict[str, Path]) -> pd.DataFrame:
+    """Per experiment, online method and seed: its training episodes, how many ended at the exit, its env steps."""
+    rows = []
+    for experiment, root in checkpoints.items():
+        for config in sorted(Path(root).glob("*/seed*/config.json")):
+            usage = json.loads(config.read_text()).get("usage", {})
+            if config.parent.parent.name in METHODS and "exits" in usage:
+                rows.append({"experiment": experiment, "method": config.parent.parent.name,
+                             "episodes": usage["episodes"], "exits": usage["exits"], "env_steps": usage["env_steps"]})
+    return pd.DataFrame(rows, columns=["experiment", "method", "episodes", "exits", "env_steps"])
+
+
+def curve_lines(h: pd.DataFrame, trained: dict[str, list[str]], exits: pd.DataFrame | None = None) -> list[str]:
     """Per experiment (``trained``: experiment -> its learned methods): how many seeds of each method with a curve
-    stopped at their plateau before the cap, and the methods trained to a fixed budget, which have none."""
+    stopped at their plateau before the cap, and the methods trained to a fixed budget, which have none; each
+    online learner whose seeds ended fewer than 5 % of their training episodes at the exit (``exits``, from
+    :func:`training_exits`), with those counts: too few successes to learn the way from."""
     lines = []
     for experiment, methods in trained.items():
         d = h[h.experiment == experiment]
@@ -98,4 +112,14 @@ def curve_lines(h: pd.DataFrame, trained: dict[str, list[str]]) -> list[str]:
         line = f"- {experiment}: seeds stopped at their plateau before the cap: {', '.join(stopped) or 'none'}"
         lines.append(line + (f"; trained to a fixed budget, with no validation measure (no curve): "
                              f"{', '.join(fixed)}." if fixed else "."))
+        for method, e in ([] if exits is None else exits[exits.experiment == experiment].groupby("method", sort=False)):
+            if (e.exits < 0.05 * e.episodes).all():
+                lines.append(f"  - {label(method)}: {_span(e.exits, '')} of its {_span(e.episodes, ',')} training "
+                             f"episodes a seed ended at the exit in up to {e.env_steps.max():,} environment steps: "
+                             "too few successes to learn the way from within this cap.")
     return lines
+
+
+def _span(values: pd.Series, spec: str) -> str:
+    low, high = format(values.min(), spec), format(values.max(), spec)
+    return low if low == high else f"{low}–{high}"

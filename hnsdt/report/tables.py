@@ -76,8 +76,8 @@ def usage_lines(results: Path) -> list[str]:
                      f"{fmt(r.training_exits, ',.0f')} |")
     never = u[u.training == "online"].groupby(["env", "method"], sort=False).agg(
         seeds=("seed", "size"), blind=("training_exits", lambda x: int((x == 0).sum())), steps=("env_steps", "max"))
-    notes = [f"- {label(method)} on {env}: {r.blind:.0f} of its {r.seeds:.0f} seeds never ended a training episode at the "
-             f"exit in up to {r.steps:,.0f} environment steps. With the step penalty its only reward until then, "
-             "nothing it learns points to the exit: this row measures its exploration, not what it would learn "
-             "from a success." for (env, method), r in never[never.blind > 0].iterrows()]
+    notes = [f"- {label(method)} on {env}: {r.blind:.0f} of its {r.seeds:.0f} seeds never ended a training episode "
+             f"at the exit in up to {r.steps:,.0f} environment steps. With the step penalty its only reward until "
+             "then, nothing it learns points to the exit: this row measures its exploration, not what it would "
+             "learn from a success." for (env, method), r in never[never.blind > 0].iterrows()]
     return lines + ([""] + notes if notes else [])
