@@ -192,7 +192,7 @@ def test_the_learning_curves_come_from_the_checkpoints_with_the_kept_evaluation_
     written."""
     import json
 
-    from hnsdt.report.curves import curve_lines, curves_figure, histories, trained_methods, training_exits
+    from hnsdt.report.curves import curve_lines, curves_figure, histories, read_usages, trained_methods, training_exits
 
     def checkpoint(method, seed, usage):
         folder = tmp_path / "models/keydoor" / method / f"seed{seed}"
@@ -208,13 +208,13 @@ def test_the_learning_curves_come_from_the_checkpoints_with_the_kept_evaluation_
         checkpoint("hnsdt", seed, {"best_epoch": 2, "stopped_early": True,
                                    "validation_loss": [{"epoch": e, "step": 10 * e, "value": 1.0 / e} for e in (1, 2)]})
         checkpoint("gru", seed, {"epochs": 20.0})
-    roots = {"keydoor": tmp_path / "models/keydoor"}
-    h = histories(roots)
+    usages = read_usages({"keydoor": tmp_path / "models/keydoor"})
+    h = histories(usages)
     kept = h[h.kept].sort_values(["method", "seed"])
     assert list(zip(kept.method, kept.seed, kept.x)) == [("hnsdt", 0, 2), ("hnsdt", 1, 2), ("ppo", 0, 10_000),
                                                          ("ppo", 1, 20_000)]
     assert set(h[h.method == "ppo"].unit) == {"environment steps"} and set(h[h.method == "hnsdt"].unit) == {"epochs"}
-    lines = curve_lines(h, trained_methods(roots), training_exits(roots))
+    lines = curve_lines(h, trained_methods(usages), training_exits(usages))
     assert lines[0].startswith("- keydoor: seeds stopped at their plateau before the cap: PPO 1 of 2, HNSDT (ours) 2")
     assert lines[0].endswith("(no curve): GRU sequential.")
     assert lines[1] == ("  - PPO: 0–1 of its 300 training episodes a seed ended at the exit in up to 30,000 "

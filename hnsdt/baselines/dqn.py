@@ -40,8 +40,7 @@ def train_dqn(layout: Layout | list[Layout], max_steps: int, net_cfg: QNetworkCo
     c = cfgs[0]
     run = start_run(layout, max_steps, network, net_cfg, cfgs, state, measure)
     q, target, device, steps = run.net, run.target, run.device, run.steps
-    due, next_log = run.loop.get("due", 0.0), run.loop.get("next_log", c.log_every)
-    next_check = run.loop.get("next_check", c.validate_every)
+    due = run.loop.get("due", 0.0)
     explore_steps = int(c.exploration_fraction * c.env_steps)
     limit = c.env_steps if stop_after is None else min(stop_after, c.env_steps)
     bar = tqdm(total=c.env_steps, initial=steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
@@ -67,21 +66,15 @@ def train_dqn(layout: Layout | list[Layout], max_steps: int, net_cfg: QNetworkCo
                     td_target = b["rewards"] + c.gamma * target(b["next_obs"]).max(-1).values * (1 - b["terminated"])
                 value = q(b["obs"]).gather(-1, b["actions"][..., None]).squeeze(-1)
                 run.learn(F.mse_loss(value, td_target, reduction="none").mean(-1), c.target_period)
-        # 4. with patience: every `validate_every` env steps, each seed's greedy steps to the exit on validation
-        evaluated = run.plateaus is not None and steps >= next_check
-        if evaluated:
-            next_check += c.validate_every
-            run.validate(steps, measure, may_stop=steps >= explore_steps)
-        # 5. one curve row per `log_every` env steps, and per evaluation
-        logged = steps >= next_log or steps >= c.env_steps
-        if logged or evaluated:
-            next_log += c.log_every if logged else 0
+        # 4. with patience, every `validate_every` env steps: each seed's greedy steps to the exit on validation;
+        # 5. a curve row every `log_every` env steps, and at each evaluation
+        if run.row_due(steps, c, measure, may_stop=steps >= explore_steps):
             run.curve_rows(steps, epsilon)
             bar.set_postfix(success=f"{run.curves[0][-1]['success']:.2f}", eps=f"{epsilon:.2f}")
         if run.done():  # every seed at its plateau
             break
     bar.close()
-    return finish(run, steps, cfg, due=due, next_log=next_log, next_check=next_check)
+    return finish(run, steps, cfg, due=due)
 
 
 class DQNAgent(OnlineAgent):

@@ -239,6 +239,8 @@ class OnlineRun:
     loop: dict = field(default_factory=dict)  # the learner's own loop variables, kept while paused
     torch_rng: torch.Tensor | None = None  # the torch stream, kept while paused (no learner here draws from it yet)
     plateaus: list[Plateau] | None = None  # per seed, when it trains to a validated plateau
+    next_log: int = 0  # env steps of the next curve row ...
+    next_check: int = 0  # ... and of the next evaluation (with a plateau)
 
     def pause(self, steps: int, **loop) -> OnlineRun:
         """The run as it stands, to continue later, in this process or another (pickled whole: the networks,
@@ -307,6 +309,19 @@ class OnlineRun:
                           "loss": float(np.mean(losses)) if losses else float("nan"),
                           **(extra[i] if extra else {}), **validation})
             self.losses[i] = []
+
+    def row_due(self, steps: int, cfg: OnlineConfig, measure, may_stop: bool) -> bool:
+        """At ``steps``: with a plateau, every ``validate_every`` env steps each seed still training evaluated by
+        ``measure`` (:meth:`validate`); whether a curve row is due — every ``log_every`` env steps, at the
+        budget's end, and at each evaluation."""
+        evaluated = self.plateaus is not None and steps >= self.next_check
+        if evaluated:
+            self.next_check += cfg.validate_every
+            self.validate(steps, measure, may_stop)
+        logged = steps >= self.next_log or steps >= cfg.env_steps
+        if logged:
+            self.next_log += cfg.log_every
+        return logged or evaluated
 
     def validate(self, steps: int, measure, may_stop: bool) -> bool:
         """Every seed still training evaluated by ``measure`` (its greedy agent; :class:`Plateau`), stopped at
@@ -378,7 +393,8 @@ def start_run(layout: Layout | list[Layout], max_steps: int, network: type, net_
                      if isinstance(cfg, ReplayConfig) else None,
                      [EpisodeStats(cfg.num_envs) for _ in cfgs], losses=[[] for _ in cfgs],
                      curves=[[] for _ in cfgs],
-                     plateaus=[Plateau(cfg.patience, floor, ceiling) for _ in cfgs] if cfg.patience else None)
+                     plateaus=[Plateau(cfg.patience, floor, ceiling) for _ in cfgs] if cfg.patience else None,
+                     next_log=cfg.log_every, next_check=cfg.validate_every)
 
 
 def finish(run: OnlineRun, steps: int, cfg, **loop):

@@ -60,9 +60,8 @@ def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: Option
     copy_rows = torch.arange(c.num_envs, device=device)[None, :]
     option = run.loop.get("option", np.zeros((n, c.num_envs), np.int64))
     need_option = run.loop.get("need_option", np.ones((n, c.num_envs), bool))
-    next_log, lengths = run.loop.get("next_log", c.log_every), run.loop.get("lengths", [[] for _ in cfgs])
+    lengths = run.loop.get("lengths", [[] for _ in cfgs])
     option_steps = run.loop.get("option_steps", 0)
-    next_check = run.loop.get("next_check", c.validate_every)
     explore_steps = int(c.exploration_fraction * c.env_steps)
     limit = c.env_steps if stop_after is None else min(stop_after, c.env_steps)
     bar = tqdm(total=c.env_steps, initial=steps, desc=desc, unit="step", unit_scale=True, disable=not progress)
@@ -119,13 +118,9 @@ def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: Option
         run.restart(next_obs, done)
         steps += c.num_envs
         bar.update(c.num_envs)
-        evaluated = run.plateaus is not None and steps >= next_check  # with patience: each seed's greedy steps
-        if evaluated:  # to the exit on validation, every `validate_every` env steps
-            next_check += c.validate_every
-            run.validate(steps, measure, may_stop=steps >= explore_steps)
-        logged = steps >= next_log or steps >= c.env_steps
-        if logged or evaluated:
-            next_log += c.log_every if logged else 0
+        # with patience, every `validate_every` env steps: each seed's greedy steps to the exit on validation;
+        # a curve row every `log_every` env steps, and at each evaluation
+        if run.row_due(steps, c, measure, may_stop=steps >= explore_steps):
             run.curve_rows(steps, epsilon, [{"option_length": option_steps / max(sum(seed_lengths), 1)}
                                             for seed_lengths in lengths])
             lengths, option_steps = [[] for _ in cfgs], 0
@@ -133,8 +128,8 @@ def train_options(layout: Layout | list[Layout], max_steps: int, net_cfg: Option
         if run.done():  # every seed at its plateau
             break
     bar.close()
-    return finish(run, steps, cfg, option=option, need_option=need_option, next_log=next_log, lengths=lengths,
-                  option_steps=option_steps, next_check=next_check)
+    return finish(run, steps, cfg, option=option, need_option=need_option, lengths=lengths,
+                  option_steps=option_steps)
 
 
 class OptionsAgent(OnlineAgent):

@@ -68,7 +68,6 @@ def train_ppo(layout: Layout | list[Layout], max_steps: int, net_cfg: ActorCriti
     c, n = cfgs[0], len(cfgs)
     run = start_run(layout, max_steps, network, net_cfg, cfgs, state, measure)
     net, device, steps = run.net, run.device, run.steps
-    next_log, next_check = run.loop.get("next_log", c.log_every), run.loop.get("next_check", c.validate_every)
     explore_steps = int(c.exploration_fraction * c.env_steps)
     limit = c.env_steps if stop_after is None else min(stop_after, c.env_steps)
     T, N, batch = c.rollout_steps, c.num_envs, c.rollout_steps * c.num_envs
@@ -126,22 +125,16 @@ def train_ppo(layout: Layout | list[Layout], max_steps: int, net_cfg: ActorCriti
                 run.learn(surrogate + c.vf_coef * value_loss - c.ent_coef * entropy, max_grad_norm=c.max_grad_norm)
                 entropies.append(entropy.detach().cpu().numpy())
 
-        # 3. with patience: every `validate_every` env steps, each seed's greedy steps to the exit on validation
-        evaluated = run.plateaus is not None and steps >= next_check
-        if evaluated:
-            next_check += c.validate_every
-            run.validate(steps, measure, may_stop=steps >= explore_steps)
-        # 4. a curve row per `log_every` env steps (at an iteration's end), and per evaluation
-        logged = steps >= next_log or steps >= c.env_steps
-        if logged or evaluated:
-            next_log += c.log_every if logged else 0
+        # 3. with patience, every `validate_every` env steps: each seed's greedy steps to the exit on validation;
+        # 4. a curve row every `log_every` env steps (at an iteration's end), and at each evaluation
+        if run.row_due(steps, c, measure, may_stop=steps >= explore_steps):
             mean_entropy = np.mean(entropies, axis=0)
             run.curve_rows(steps, None, [{"entropy": round(float(e), 4)} for e in mean_entropy])
             bar.set_postfix(success=f"{run.curves[0][-1]['success']:.2f}", entropy=f"{mean_entropy[0]:.2f}")
         if run.done():  # every seed at its plateau
             break
     bar.close()
-    return finish(run, steps, cfg, next_log=next_log, next_check=next_check)
+    return finish(run, steps, cfg)
 
 
 class PPOAgent(OnlineAgent):

@@ -100,12 +100,8 @@ def _sigmoid(x: torch.Tensor, stack_size: int) -> torch.Tensor:
 
 
 @dataclass
-class ActorCriticConfig:
-    n_flags: int
-    grid_h: int
-    grid_w: int
-    hidden: int = 128
-    n_layers: int = 2
+class ActorCriticConfig(QNetworkConfig):
+    """The Q-network's knobs, for each of the actor's and the critic's MLPs."""
 
 
 class ActorCritic(StateFeatures, Network, arch="actor_critic", config=ActorCriticConfig):

@@ -359,12 +359,12 @@ def one_hot_view(states: torch.Tensor, radius: int) -> torch.Tensor:
     return torch.cat([F.one_hot(codes, N_CODES).float().flatten(-2), flags], dim=-1)
 
 
-@dataclass
-class ViewQNetworkConfig(QNetworkConfig):
-    view_radius: int = 2
+class ViewFeatures:
+    """The value networks' MLP input on views, in place of :class:`~hnsdt.models.qnetwork.StateFeatures`: the
+    one-hot cell codes of the view and the flags."""
 
+    cfg: object
 
-class ViewQNetwork(ViewModel, QNetwork, arch="view_q_network", config=ViewQNetworkConfig):
     @staticmethod
     def n_inputs(cfg) -> int:
         return (2 * cfg.view_radius + 1) ** 2 * N_CODES + cfg.n_flags
@@ -374,15 +374,22 @@ class ViewQNetwork(ViewModel, QNetwork, arch="view_q_network", config=ViewQNetwo
 
 
 @dataclass
+class ViewQNetworkConfig(QNetworkConfig):
+    view_radius: int = 2
+
+
+class ViewQNetwork(ViewModel, ViewFeatures, QNetwork, arch="view_q_network", config=ViewQNetworkConfig):
+    pass
+
+
+@dataclass
 class ViewOptionCriticConfig(OptionCriticConfig):
     view_radius: int = 2
 
 
-class ViewOptionCritic(ViewModel, OptionCritic, arch="view_option_critic", config=ViewOptionCriticConfig):
-    n_inputs = staticmethod(ViewQNetwork.n_inputs)
-
-    def features(self, states: torch.Tensor) -> torch.Tensor:
-        return one_hot_view(states, self.cfg.view_radius)
+class ViewOptionCritic(ViewModel, ViewFeatures, OptionCritic, arch="view_option_critic",
+                       config=ViewOptionCriticConfig):
+    pass
 
 
 @dataclass
@@ -390,8 +397,5 @@ class ViewActorCriticConfig(ActorCriticConfig):
     view_radius: int = 2
 
 
-class ViewActorCritic(ViewModel, ActorCritic, arch="view_actor_critic", config=ViewActorCriticConfig):
-    n_inputs = staticmethod(ViewQNetwork.n_inputs)
-
-    def features(self, states: torch.Tensor) -> torch.Tensor:
-        return one_hot_view(states, self.cfg.view_radius)
+class ViewActorCritic(ViewModel, ViewFeatures, ActorCritic, arch="view_actor_critic", config=ViewActorCriticConfig):
+    pass

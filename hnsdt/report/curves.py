@@ -25,33 +25,41 @@ from hnsdt.report.common import label  # noqa: E402
 MEASURES = {"steps": "steps to the exit", "loss": "validation loss"}  # validation_<name> -> the axis' name
 
 
-def trained_methods(checkpoints: dict[str, Path]) -> dict[str, list[str]]:
-    """Per experiment, the learned methods with checkpoints in its folder, in the registry's order."""
-    return {e: [m for m in METHODS if any((Path(root) / m).glob("seed*/config.json"))]
-            for e, root in checkpoints.items()}
-
-
-def histories(checkpoints: dict[str, Path]) -> pd.DataFrame:
-    """Per experiment (a name -> its folder of ``METHOD/seedN/config.json``), one row per recorded evaluation:
-    experiment, method, seed, measure, x (env steps online, the epoch offline), unit, value, kept (the evaluation
-    whose weights the seed kept), floor, stopped (the seed stopped at its plateau before the cap)."""
-    rows = []
+def read_usages(checkpoints: dict[str, Path]) -> list[tuple[str, str, int, dict]]:
+    """Per experiment (a name -> its folder of ``METHOD/seedN/config.json``), each learned method's checkpoints'
+    usage, read once: (experiment, method, seed, usage)."""
+    out = []
     for experiment, root in checkpoints.items():
         for config in sorted(Path(root).glob("*/seed*/config.json")):
-            method, seed = config.parent.parent.name, int(config.parent.name[len("seed"):])
-            if method not in METHODS:
-                continue
-            usage = json.loads(config.read_text()).get("usage", {})
-            for name in MEASURES:
-                for h in usage.get(f"validation_{name}", []):
-                    online = "epoch" not in h
-                    x = h["step"] if online else h["epoch"]
-                    kept = usage.get("best_step" if online else "best_epoch")
-                    rows.append({"experiment": experiment, "method": method, "seed": seed, "measure": name,
-                                 "x": x, "unit": "environment steps" if online else "epochs",
-                                 "value": float(h["value"]), "kept": x == kept,
-                                 "floor": usage.get("validation_floor", np.nan),
-                                 "stopped": bool(usage.get("stopped_early"))})
+            method = config.parent.parent.name
+            if method in METHODS:
+                out.append((experiment, method, int(config.parent.name[len("seed"):]),
+                            json.loads(config.read_text()).get("usage", {})))
+    return out
+
+
+def trained_methods(usages: list[tuple]) -> dict[str, list[str]]:
+    """Per experiment, the learned methods with checkpoints (:func:`read_usages`), in the registry's order."""
+    present = {(experiment, method) for experiment, method, _, _ in usages}
+    return {e: [m for m in METHODS if (e, m) in present] for e in dict.fromkeys(u[0] for u in usages)}
+
+
+def histories(usages: list[tuple]) -> pd.DataFrame:
+    """One row per recorded evaluation of the checkpoints (:func:`read_usages`): experiment, method, seed,
+    measure, x (env steps online, the epoch offline), unit, value, kept (the evaluation whose weights the seed
+    kept), floor, stopped (the seed stopped at its plateau before the cap)."""
+    rows = []
+    for experiment, method, seed, usage in usages:
+        for name in MEASURES:
+            for h in usage.get(f"validation_{name}", []):
+                online = "epoch" not in h
+                x = h["step"] if online else h["epoch"]
+                kept = usage.get("best_step" if online else "best_epoch")
+                rows.append({"experiment": experiment, "method": method, "seed": seed, "measure": name,
+                             "x": x, "unit": "environment steps" if online else "epochs",
+                             "value": float(h["value"]), "kept": x == kept,
+                             "floor": usage.get("validation_floor", np.nan),
+                             "stopped": bool(usage.get("stopped_early"))})
     return pd.DataFrame(rows, columns=["experiment", "method", "seed", "measure", "x", "unit", "value", "kept",
                                        "floor", "stopped"])
 
@@ -86,15 +94,11 @@ def curves_figure(h: pd.DataFrame, experiment: str, path: Path) -> None:
     plt.close(fig)
 
 
-def training_exits(checkpoints: dict[str, Path]) -> pd.DataFrame:
-    """Per experiment, online method and seed: its training episodes, how many ended at the exit, its env steps."""
-    rows = []
-    for experiment, root in checkpoints.items():
-        for config in sorted(Path(root).glob("*/seed*/config.json")):
-            usage = json.loads(config.read_text()).get("usage", {})
-            if config.parent.parent.name in METHODS and "exits" in usage:
-                rows.append({"experiment": experiment, "method": config.parent.parent.name,
-                             "episodes": usage["episodes"], "exits": usage["exits"], "env_steps": usage["env_steps"]})
+def training_exits(usages: list[tuple]) -> pd.DataFrame:
+    """Per experiment, online method and seed (:func:`read_usages`): its training episodes, how many ended at the
+    exit, its env steps."""
+    rows = [{"experiment": e, "method": m, "episodes": u["episodes"], "exits": u["exits"], "env_steps": u["env_steps"]}
+            for e, m, _, u in usages if "exits" in u]
     return pd.DataFrame(rows, columns=["experiment", "method", "episodes", "exits", "env_steps"])
 
 

@@ -15,7 +15,7 @@ from hnsdt.core.methods import PAPER_ARM, PARADIGMS, PROPOSED
 from hnsdt.core.provenance import git_revision, params_digest
 from hnsdt.report.claims import BOOTSTRAP, SOLVED, claim_lines, paper_claims, seed_lines, seed_view
 from hnsdt.report.common import label, lock_outputs, render_template
-from hnsdt.report.curves import curve_lines, curves_figure, histories, trained_methods, training_exits
+from hnsdt.report.curves import curve_lines, curves_figure, histories, read_usages, trained_methods, training_exits
 from hnsdt.report.figures import comparison_figure, environment_figure, heatmap_figure, paradigm_figure, regret_figure
 from hnsdt.report.headline import headline_metrics, write_headline
 from hnsdt.report.paper_arm import paper_arm_lines
@@ -118,10 +118,11 @@ def learning_curves(outs: dict[str, str], root: Path, figures: Path) -> tuple[li
     checkpoints = {Path(f).name: root / f for f in folders}
     if any(p.startswith("generalisation/models/") for p in outs):
         checkpoints["unseen layouts"] = root / "generalisation/models"
-    h = histories(checkpoints)
+    usages = read_usages(checkpoints)
+    h = histories(usages)
     made = []
     for experiment in dict.fromkeys(h.experiment):
         name = f"learning_{experiment.replace(' ', '_')}.png"
         curves_figure(h, experiment, figures / name)
         made.append((experiment, name))
-    return curve_lines(h, trained_methods(checkpoints), training_exits(checkpoints)), made
+    return curve_lines(h, trained_methods(usages), training_exits(usages)), made
