@@ -16,7 +16,7 @@ from conftest import REPO
 PACKAGE = Path(REPO) / "hnsdt"
 LAYERS = (  # bottom to top
     ("ground", ("hnsdt.core",)),  # file I/O, reproducibility, the method registry (facts), provenance, the task runner
-    ("world", ("hnsdt.envs", "hnsdt.symbolic")),  # the grid worlds and the symbolic planner over them
+    ("world", ("hnsdt.envs", "hnsdt.symbolic", "hnsdt.minigrid")),  # the grid worlds, the symbolic planner, MiniGrid
     ("networks", ("hnsdt.models",)),  # the trained networks and how they are fitted
     ("policies", ("hnsdt.agents", "hnsdt.baselines", "hnsdt.implementations")),  # agents, and what implements a method
     ("data", ("hnsdt.data", "hnsdt.logs")),  # LeRobot datasets and episode recordings

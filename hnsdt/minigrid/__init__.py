@@ -1,0 +1,13 @@
+"""MiniGrid's own worlds, stepped by MiniGrid (issue 69): its key–door envs under the paper's action failures
+(:mod:`.live`), their state and rules written out (:mod:`.world`), φ over that state (:mod:`.abstraction`), the
+exact optimum (:mod:`.optimum`) and MiniGrid's BabyAI bot as a second reference (:mod:`.bot`).
+
+A package of its own beside :mod:`hnsdt.envs` (our simulator) so that the paper's stages, which depend on that
+one, do not rerun for a change here."""
+
+from hnsdt.minigrid.live import ActionFailures, make_env, read_world, snapshot, world_of
+from hnsdt.minigrid.optimum import Optimum, WorldMDP
+from hnsdt.minigrid.world import Actions, MiniGridError, World, WorldState
+
+__all__ = ["ActionFailures", "Actions", "MiniGridError", "Optimum", "World", "WorldMDP", "WorldState", "make_env",
+           "read_world", "snapshot", "world_of"]

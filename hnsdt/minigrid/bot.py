@@ -1,0 +1,74 @@
+"""MiniGrid's BabyAI bot (``minigrid.utils.baby_ai_bot.BabyAIBot``, written by MiniGrid's authors) as a reference
+policy on MiniGrid's key–door worlds.
+
+The bot solves BabyAI missions, given as BabyAI instructions; these envs have none, so each gets the instruction
+its mission states: ``pick up the <color> <type>`` for UnlockPickup, KeyCorridor and BlockedUnlockPickup,
+``open the <color> door`` for Unlock. DoorKey's mission ends on the goal cell, which BabyAI's "go to" does not
+(it ends next to the object, facing it): the bot gets the sub-goal "go next to the goal cell" and, when it
+says it is done, one forward onto it. The bot's search for a key asks the env for rooms (``room_from_pos``),
+which DoorKey's single-grid env has not; it is given one that answers none (the bot only uses it for
+instructions that name a location, which these do not). Everything else is the bot's own: it sees only its
+7 × 7 view and maps the world as it goes.
+
+Under action failures the bot is told the action it chose (``replan(action_taken)``); it replans from what it
+then observes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from hnsdt.minigrid.live import make_env, read_world
+from hnsdt.minigrid.world import GOAL, OPEN_DOOR, Actions
+
+
+@dataclass(frozen=True)
+class BotEpisode:
+    success: bool
+    steps: int
+    reward: float
+    error: str = ""  # the bot's exception, when it raised one (the episode counts as failed)
+
+
+def _instruction(u, task: str):
+    from minigrid.envs.babyai.core.verifier import ObjDesc, OpenInstr, PickupInstr
+
+    if task == OPEN_DOOR:
+        return OpenInstr(ObjDesc("door", u.door.color))
+    if task == GOAL:
+        return OpenInstr(ObjDesc("door"))  # replaced by the goal sub-goal below; the bot needs one to start
+    return PickupInstr(ObjDesc(u.obj.type, u.obj.color))
+
+
+def bot_episode(env_id: str, seed: int, fail_prob: float = 0.0, failure_seed: int = 0) -> BotEpisode:
+    """One episode of the BabyAI bot on ``env_id``'s world ``seed``, with the failures drawn from
+    ``failure_seed``."""
+    from minigrid.utils.baby_ai_bot import BabyAIBot, GoNextToSubgoal
+
+    env = make_env(env_id, fail_prob)
+    try:
+        env.reset(seed=int(seed), options={"failure_seed": int(failure_seed)})
+        world, _ = read_world(env, env_id, seed)
+        u = env.unwrapped
+        if not hasattr(u, "room_from_pos"):
+            u.room_from_pos = lambda x, y: None
+        u.instrs = _instruction(u, world.task)
+        u.instrs.reset_verifier(env)
+        bot = BabyAIBot(env)
+        if world.task == GOAL:
+            (r, c), = world.goals
+            bot.stack = [GoNextToSubgoal(bot, (c, r))]
+        action, steps = None, 0
+        while True:
+            try:
+                action = bot.replan(action)
+            except Exception as exc:  # the bot gives up (e.g. an assertion in its planner): a failed episode
+                return BotEpisode(False, steps, 0.0, f"{type(exc).__name__}: {exc}"[:200])
+            if action == Actions.done and world.task == GOAL:
+                action = Actions.forward  # the last step of "go to the goal": onto it
+            _, reward, terminated, truncated, _ = env.step(action)
+            steps += 1
+            if terminated or truncated:
+                return BotEpisode(bool(terminated and reward > 0), steps, float(reward))
+    finally:
+        env.close()

@@ -1,0 +1,141 @@
+"""MiniGrid's own worlds (hnsdt.minigrid): our written-out rules, φ and the exact optimum against
+MiniGrid's own stepping; the action failures; the BabyAI bot; bad ids."""
+
+import numpy as np
+import pytest
+
+from hnsdt.minigrid import (
+    Actions, MiniGridError, WorldMDP, make_env, read_world, snapshot, world_of,
+)
+from hnsdt.minigrid.bot import bot_episode
+from hnsdt.minigrid.world import CARRIED, GOAL, GONE, OPEN_DOOR, PICKUP
+from hnsdt.minigrid.abstraction import DONE, phi, phi_live
+
+WORLDS = ("MiniGrid-DoorKey-5x5-v0", "MiniGrid-DoorKey-6x6-v0", "MiniGrid-Unlock-v0", "MiniGrid-UnlockPickup-v0",
+          "MiniGrid-KeyCorridorS3R1-v0", "MiniGrid-BlockedUnlockPickup-v0")
+
+
+def _target_name(world):
+    if world.task == OPEN_DOOR:
+        r, c = world.doors[world.target].cell
+        return f"{r},{c}"
+    return world.objects[world.target].name if world.task == PICKUP else ""
+
+
+@pytest.mark.parametrize("env_id", WORLDS)
+def test_phi_and_the_rules_agree_with_minigrid_stepping_on_random_actions(env_id):
+    """MiniGrid steps its env, World.step our state, on the same random actions (biased towards the ones that
+    change something); every step the whole state, every predicate of φ and the end of the episode agree."""
+    rng = np.random.default_rng(0)
+    env = make_env(env_id)
+    seen = set()
+    for seed in range(16):
+        env.reset(seed=seed)
+        world, live = read_world(env, env_id, seed)
+        s = world.start
+        for _ in range(400):
+            a = int(rng.choice(7, p=[0.15, 0.15, 0.3, 0.12, 0.1, 0.15, 0.03]))
+            _, reward, terminated, truncated, _ = env.step(a)
+            s, success = world.step(s, a)
+            assert snapshot(world, env, live) == s
+            assert phi(world, s) == phi_live(env, world.task, _target_name(world))
+            assert success == terminated == (reward > 0) == (DONE in phi(world, s))
+            seen |= {cell for cell in s.objects if cell in (CARRIED, GONE)} | set(s.doors)
+            if terminated or truncated:
+                break
+    assert CARRIED in seen and 0 in seen  # (something was carried and a door opened: the walk did get somewhere)
+
+
+def test_a_predicate_the_rules_get_wrong_is_caught():
+    """The check above can fail: with toggle made to open a locked door without its key, φ disagrees."""
+    env_id = "MiniGrid-DoorKey-5x5-v0"
+    env = make_env(env_id)
+    env.reset(seed=0)
+    world, live = read_world(env, env_id, 0)
+    wrong = world.start._replace(doors=(0,))  # what a rule that ignored the key would give
+    assert phi(world, wrong) != phi_live(env, world.task)
+
+
+def test_action_failures_leave_the_world_unchanged_and_count_the_step():
+    env_id = "MiniGrid-DoorKey-5x5-v0"
+    env = make_env(env_id, fail_prob=1.0)
+    env.reset(seed=3)
+    world, live = read_world(env, env_id, 3)
+    for a in (Actions.left, Actions.right, Actions.forward):
+        *_, info = env.step(a)
+        assert info["move_failed"] and snapshot(world, env, live) == world.start
+    assert env.unwrapped.step_count == 3
+    *_, info = env.step(Actions.toggle)  # never fails
+    assert not info["move_failed"]
+    # The same seed draws the same failures; another failure_seed other ones on the same world.
+    runs = []
+    for failure_seed in (0, 0, 1):
+        env = make_env(env_id, fail_prob=0.5)
+        env.reset(seed=3, options={"failure_seed": failure_seed})
+        assert read_world(env, env_id, 3)[0].start == world.start
+        runs.append([env.step(Actions.left)[-1]["move_failed"] for _ in range(40)])
+    assert runs[0] == runs[1] != runs[2]
+
+
+@pytest.mark.parametrize("env_id, fail_prob", [("MiniGrid-DoorKey-5x5-v0", 0.0), ("MiniGrid-DoorKey-5x5-v0", 0.3),
+                                               ("MiniGrid-Unlock-v0", 0.2)])
+def test_the_optimum_is_what_its_policy_gets_in_minigrid(env_id, fail_prob):
+    """The optimal policy, played in MiniGrid's own env with its failures: at fail_prob 0 exactly the optimum's
+    steps and reward; with failures its mean reward and steps within 4 standard errors over 300 episodes."""
+    world = world_of(env_id, 5)
+    mdp = WorldMDP(world)
+    opt, policy = mdp.solve(fail_prob, keep_policy=True)
+    env = make_env(env_id, fail_prob)
+    rewards, steps = [], []
+    for k in range(300 if fail_prob else 1):
+        env.reset(seed=5, options={"failure_seed": k})
+        w, live = read_world(env, env_id, 5)
+        for t in range(world.max_steps):
+            s = snapshot(w, env, live)
+            _, reward, terminated, truncated, _ = env.step(int(policy[t, mdp.index[s]]))
+            if terminated or truncated:
+                break
+        rewards.append(reward)
+        steps.append(t + 1)
+    assert opt.success == pytest.approx(1.0)
+    if not fail_prob:
+        assert (steps[0], rewards[0]) == (opt.steps, pytest.approx(opt.ret))
+        return
+    for values, expected in ((rewards, opt.ret), (steps, opt.steps)):
+        assert abs(np.mean(values) - expected) < 4 * np.std(values) / np.sqrt(len(values)) + 1e-9
+
+
+def test_the_settled_shortcut_gives_what_every_step_gives():
+    mdp = WorldMDP(world_of("MiniGrid-KeyCorridorS3R1-v0", 2))
+    for p in (0.0, 0.2):
+        fast, slow = mdp.solve(p)[0], mdp.solve(p, settle=False)[0]
+        for a, b in zip((fast.success, fast.ret, fast.steps), (slow.success, slow.ret, slow.steps)):
+            assert a == pytest.approx(b, abs=1e-12)
+
+
+def test_the_optimum_beats_the_babyai_bot_and_the_bot_solves_its_worlds():
+    for env_id in ("MiniGrid-DoorKey-8x8-v0", "MiniGrid-UnlockPickup-v0"):
+        for seed in range(3):
+            ep = bot_episode(env_id, seed)
+            opt = WorldMDP(world_of(env_id, seed)).solve(0.0)[0]
+            assert ep.success and not ep.error
+            assert ep.steps >= opt.steps and ep.reward <= opt.ret + 1e-12
+
+
+def test_the_worlds_say_what_ends_them():
+    assert world_of("MiniGrid-DoorKey-8x8-v0", 0).task == GOAL
+    assert world_of("MiniGrid-Unlock-v0", 0).task == OPEN_DOOR
+    up = world_of("MiniGrid-UnlockPickup-v0", 0)
+    assert up.task == PICKUP and up.objects[up.target].kind == "box"
+
+
+@pytest.mark.parametrize("env_id, message", [
+    ("MiniGrid-NoSuchWorld-v0", "is not a registered gymnasium id"),
+    ("CartPole-v1", "is not a MiniGrid env"),
+    ("MiniGrid-Empty-8x8-v0", "has no key and locked door"),
+    ("MiniGrid-LavaCrossingS9N1-v0", "cell type 'lava'"),
+])
+def test_a_world_that_is_not_a_key_door_world_is_one_clear_line(env_id, message):
+    with pytest.raises(MiniGridError, match=message) as err:
+        world_of(env_id, 0)
+    assert "\n" not in str(err.value)
