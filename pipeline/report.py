@@ -3,7 +3,7 @@ metrics (hnsdt.stages.report).
 
 Usage: python pipeline/report.py --results results --generalisation generalisation/results --out report
        --headline metrics/headline --ablations benchmarks/results/generalisation.csv
-       --experiments generalisation/experiments
+       --experiments generalisation/experiments --minigrid minigrid
 """
 
 import argparse
@@ -19,8 +19,9 @@ from hnsdt.stages.report import report  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    for name in ("--results", "--generalisation", "--out", "--headline", "--ablations", "--experiments"):
+    for name in ("--results", "--generalisation", "--out", "--headline", "--ablations", "--experiments", "--minigrid"):
         parser.add_argument(name, required=True, type=Path)
     args = parser.parse_args()
     sys.exit(run(report, results=args.results, out=args.out, generalisation=args.generalisation,
-                        headline=args.headline, ablations=args.ablations, experiments=args.experiments))
+                        headline=args.headline, ablations=args.ablations, experiments=args.experiments,
+                        minigrid=args.minigrid))

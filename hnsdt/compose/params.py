@@ -276,6 +276,37 @@ class ComputeParams(Section):
     threads: PositiveInt = Field(1, description="torch CPU threads of each run; part of the bytes")
 
 
+class MiniGridEnvParams(Section):
+    id: str = Field(description="the gymnasium id of a MiniGrid key-door world (e.g. MiniGrid-DoorKey-8x8-v0), "
+                    "stepped by MiniGrid itself")
+
+
+class SeedRange(Section):
+    first: int = Field(ge=0, description="the first of the seeds")
+    count: PositiveInt = Field(description="how many seeds, from first on")
+
+    @property
+    def seeds(self) -> list[int]:
+        return list(range(self.first, self.first + self.count))
+
+
+class MiniGridParams(Section):
+    envs: dict[str, MiniGridEnvParams] = Field(min_length=1, description="MiniGrid's own worlds, one stage per "
+                                               "name (minigrid_reference@<name>, outputs under minigrid/<name>)")
+    test_seeds: SeedRange = Field(description="the worlds evaluated: MiniGrid's reset seeds, never trained on")
+    fail_probs: list[Probability] = Field(min_length=1, description="the paper's action-failure probabilities")
+    bot_episodes: PositiveInt = Field(5, description="BabyAI bot episodes per world and fail_prob, each with its "
+                                      "own failure draws")
+
+    @field_validator("envs")
+    @classmethod
+    def _names(cls, value):
+        for name in value:
+            if not re.fullmatch(r"[a-z][a-z0-9_]*", name):  # (a DVC stage name and a folder name)
+                raise ValueError(f"{name!r}: a world's name is lower-case letters, digits and _")
+        return value
+
+
 class TheoremsParams(Section):
     gamma: float = Field(gt=0, lt=1, description="discount in Theorem 1's bound")
     B: float = Field(ge=0, description="extra cost of one failed operator step")
@@ -310,6 +341,7 @@ class Params(Section):
     compute: ComputeParams = ComputeParams()
     theorems: TheoremsParams | None = None
     generalisation: GeneralisationParams | None = None
+    minigrid: MiniGridParams | None = None
     unseen_experiments: dict[str, dict[str, Any]] = Field(
         default_factory=dict, description="further unseen-layout experiments: per name, the `generalisation` keys "
         "it changes (each one stage, unseen_experiment@<name>, outputs under generalisation/experiments/<name>; "

@@ -18,6 +18,7 @@ from hnsdt.report.common import label, lock_outputs, render_template
 from hnsdt.report.curves import curve_lines, curves_figure, histories, read_usages, trained_methods, training_exits
 from hnsdt.report.figures import comparison_figure, environment_figure, heatmap_figure, paradigm_figure, regret_figure
 from hnsdt.report.headline import headline_metrics, write_headline
+from hnsdt.report.minigrid import minigrid_context
 from hnsdt.report.paper_arm import paper_arm_lines
 from hnsdt.report.tables import optimum_table, results_table, paper_target_lines, usage_lines
 from hnsdt.report.theorems import theorem_sections
@@ -26,8 +27,10 @@ from hnsdt.report.unseen import experiment_contexts, generalisation_context
 
 def write_report(params: Params, results: Path, out: Path, lock_path: str | Path = "dvc.lock",
                  generalisation: Path | None = None, headline: Path | None = None,
-                 ablations: Path | None = None, experiments: Path | None = None) -> Path:
-    """``generalisation``: the unseen-layout experiment's results folder (its section is left out without one);
+                 ablations: Path | None = None, experiments: Path | None = None,
+                 minigrid: Path | None = None) -> Path:
+    """``minigrid``: the folder of MiniGrid's own worlds (``minigrid``/NAME/reference; its section is left out
+    without one); ``generalisation``: the unseen-layout experiment's results folder (its section is left out without one);
     ``experiments``: the folder of the further ones (``unseen_experiments``: each in ``experiments``/NAME);
     ``headline``: the folder to write :func:`headline_metrics` into (one JSON file per split); ``ablations``: the
     measured variants of that experiment (:mod:`hnsdt.evaluation.ablations`; its table and scaling figure are left
@@ -58,7 +61,8 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
         outs = lock_outputs(lock_path)
         curves, curve_figures = learning_curves(outs, Path(lock_path).parent, tmp / "figures")
         inputs = {p: md5 for p, md5 in sorted(outs.items())
-                  if p.startswith(("data/", "models/", "generalisation/dataset", "generalisation/models/"))}
+                  if p.startswith(("data/", "models/", "generalisation/dataset", "generalisation/models/",
+                                   "minigrid/"))}
         unseen = {}
         if generalisation is not None:
             if not (generalisation / "summary.csv").is_file():
@@ -94,7 +98,8 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             curves=curves, curve_figures=curve_figures,
             numbers=results_table(numbers), recorded=len(recorded),
             example_episode=recorded.episode_id.iloc[0] if len(recorded) else "",
-            generalisation=bool(unseen), **unseen, **variants, experiments=further)
+            generalisation=bool(unseen), **unseen, **variants, experiments=further,
+            **(minigrid_context(params, minigrid) if minigrid is not None else {}))
         (tmp / "report.md").write_text(text)
         theorem_data = {**theorem_data, "claims": claim_rows} if claim_rows else theorem_data
         if paper_claim_rows and arms:

@@ -1,0 +1,33 @@
+"""Stage `minigrid_reference`: the exact optimum and the BabyAI bot on one of MiniGrid's own worlds
+(``minigrid.envs.<name>``), every test seed and fail_prob."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from hnsdt.compose.config import Params
+from hnsdt.core.fileio import atomic_dir
+from hnsdt.stages.common import provenance
+
+
+def minigrid_reference(params: Params, env: str, out: Path) -> Path:
+    """``out``: ``reference.csv`` (per world, fail_prob and reference), ``summary.csv`` (mean over the worlds)
+    and ``provenance.json``."""
+    from hnsdt.evaluation.minigrid import ROW_COLUMNS, SUMMARY_COLUMNS, reference_rows, summarise, to_csv
+    from hnsdt.minigrid.live import check_id
+
+    section = params.need("minigrid")
+    if env not in section.envs:
+        raise params.error(f"minigrid.envs has no {env!r} (it has {', '.join(section.envs)})")
+    env_id = section.envs[env].id
+    check_id(env_id)
+    rows = reference_rows(env_id, section.test_seeds.seeds, section.fail_probs, section.bot_episodes)
+    with atomic_dir(out) as work:
+        work.mkdir(parents=True)
+        (work / "reference.csv").write_text(to_csv(rows, ROW_COLUMNS))
+        (work / "summary.csv").write_text(to_csv(summarise(rows), SUMMARY_COLUMNS))
+        (work / "provenance.json").write_text(json.dumps({"env": env, "id": env_id, **provenance(params)},
+                                                         indent=1) + "\n")
+    print(f"wrote {out}")
+    return Path(out)

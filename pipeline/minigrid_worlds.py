@@ -1,0 +1,26 @@
+"""DVC stage `minigrid_reference`: the exact optimum and the BabyAI bot on one of MiniGrid's own worlds
+(hnsdt.stages.minigrid_reference).
+
+Usage: python pipeline/minigrid_worlds.py reference --env NAME --out minigrid/NAME/reference
+NAME is a key of params.yaml's minigrid.envs. (Not pipeline/minigrid.py: the script's folder comes first on
+sys.path, and that name would hide the minigrid package.)
+"""
+
+import argparse
+import runpy
+import sys
+from pathlib import Path
+
+# same bytes on any machine (hash seed, CPU kernels, threads): re-run pinned before NumPy loads (as hnsdt would)
+runpy.run_path(str(Path(__file__).resolve().parents[1] / "hnsdt/core/reproducible.py"))["pin_process"]()
+
+from hnsdt.stages.common import run  # noqa: E402
+from hnsdt.stages.minigrid_reference import minigrid_reference  # noqa: E402
+
+if __name__ == "__main__":
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("step", choices=["reference"])
+    parser.add_argument("--env", required=True)
+    parser.add_argument("--out", required=True, type=Path)
+    args = parser.parse_args()
+    sys.exit(run(minigrid_reference, env=args.env, out=args.out))
