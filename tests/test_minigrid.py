@@ -1,6 +1,8 @@
 """MiniGrid's own worlds (hnsdt.minigrid): our written-out rules, φ and the exact optimum against
 MiniGrid's own stepping; the action failures; the BabyAI bot; bad ids."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -139,3 +141,29 @@ def test_a_world_that_is_not_a_key_door_world_is_one_clear_line(env_id, message)
     with pytest.raises(MiniGridError, match=message) as err:
         world_of(env_id, 0)
     assert "\n" not in str(err.value)
+
+
+def test_the_reference_stage_writes_both_references_and_a_bad_world_writes_nothing(tmp_path):
+    """The stage on one world (one seed, one fail_prob): the optimum's row and the bot's, each world's summary;
+    a world the params do not name, or an id that is no key-door world, is one line and leaves no output."""
+    import yaml
+
+    from hnsdt.compose.params import ParamsError, validate
+    from hnsdt.evaluation.minigrid import read_csv
+    from hnsdt.stages.minigrid_reference import minigrid_reference
+    from conftest import REPO
+
+    raw = yaml.safe_load((Path(REPO) / "params.yaml").read_text())
+    raw["minigrid"].update(envs={"dk5": {"id": "MiniGrid-DoorKey-5x5-v0"}, "empty": {"id": "MiniGrid-Empty-5x5-v0"}},
+                           test_seeds={"first": 7, "count": 1}, fail_probs=[0.1], bot_episodes=2)
+    params = validate(raw)
+    out = minigrid_reference(params, "dk5", tmp_path / "dk5")
+    rows = read_csv((out / "reference.csv").read_text())
+    assert [(r["method"], r["seed"], r["episodes"]) for r in rows] == [("optimum", 7, 0), ("babyai_bot", 7, 2)]
+    assert rows[0]["success"] == pytest.approx(1.0) and rows[1]["steps"] >= rows[0]["steps"]
+    assert len(read_csv((out / "summary.csv").read_text())) == 2
+    with pytest.raises(ParamsError, match="minigrid.envs has no 'nope'"):
+        minigrid_reference(params, "nope", tmp_path / "nope")
+    with pytest.raises(MiniGridError, match="has no key and locked door"):
+        minigrid_reference(params, "empty", tmp_path / "empty")
+    assert not (tmp_path / "nope").exists() and not (tmp_path / "empty").exists()
