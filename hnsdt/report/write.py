@@ -99,7 +99,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             numbers=results_table(numbers), recorded=len(recorded),
             example_episode=recorded.episode_id.iloc[0] if len(recorded) else "",
             generalisation=bool(unseen), **unseen, **variants, experiments=further,
-            **(minigrid_context(params, minigrid) if minigrid is not None else {}))
+            **({"minigrid_lines": []} | (minigrid_context(params, minigrid) if minigrid is not None else {})))
         (tmp / "report.md").write_text(text)
         theorem_data = {**theorem_data, "claims": claim_rows} if claim_rows else theorem_data
         if paper_claim_rows and arms:
