@@ -295,8 +295,8 @@ class MiniGridParams(Section):
                                                "name (minigrid_reference@<name>, outputs under minigrid/<name>)")
     test_seeds: SeedRange = Field(description="the worlds evaluated: MiniGrid's reset seeds, never trained on")
     fail_probs: list[Probability] = Field(min_length=1, description="the paper's action-failure probabilities")
-    bot_episodes: PositiveInt = Field(5, description="BabyAI bot episodes per world and fail_prob, each with its "
-                                      "own failure draws")
+    episodes: PositiveInt = Field(5, description="episodes of the BabyAI bot and of the symbolic agent per world "
+                                  "and fail_prob, each with its own failure draws")
 
     @field_validator("envs")
     @classmethod

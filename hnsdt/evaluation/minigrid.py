@@ -1,9 +1,11 @@
-"""The references on MiniGrid's own worlds: the exact optimum and the BabyAI bot, per world and fail_prob.
+"""The references on MiniGrid's own worlds, per world and fail_prob: the exact optimum, MiniGrid's BabyAI bot and
+the symbolic agent (our planner with hand-written controllers).
 
 One row per (world, fail_prob, reference): ``optimum`` is exact (:class:`hnsdt.minigrid.WorldMDP`: success
-probability, expected MiniGrid reward, expected steps of the successful episodes); ``babyai_bot`` is the mean of
-``bot_episodes`` episodes of MiniGrid's bot in MiniGrid's own env, each with its own failure draws. The summary
-averages the worlds: success and reward over every world, steps over the worlds with a success.
+probability, expected MiniGrid reward, expected steps of the successful episodes); ``babyai_bot`` and ``symbolic``
+are means of ``episodes`` episodes in MiniGrid's own env, each with its own failure draws (``plans``: the
+symbolic agent's planner calls per episode). The summary averages the worlds: success and reward over every world,
+steps over the worlds with a success.
 """
 
 from __future__ import annotations
@@ -17,17 +19,19 @@ from tqdm import tqdm
 
 from hnsdt.minigrid import WorldMDP, world_of
 from hnsdt.minigrid.bot import bot_episode
+from hnsdt.minigrid.controllers import symbolic_episode
 
-OPTIMUM, BOT = "optimum", "babyai_bot"
-ROW_COLUMNS = ("env", "seed", "fail_prob", "method", "episodes", "success", "reward", "steps", "bot_errors",
+OPTIMUM, BOT, SYMBOLIC = "optimum", "babyai_bot", "symbolic"
+POLICIES = {BOT: bot_episode, SYMBOLIC: symbolic_episode}  # the references played in MiniGrid's env
+ROW_COLUMNS = ("env", "seed", "fail_prob", "method", "episodes", "success", "reward", "steps", "plans", "gave_up",
                "states")
 SUMMARY_COLUMNS = ("env", "fail_prob", "method", "worlds", "success_mean", "reward_mean", "steps_mean",
-                   "bot_errors")
+                   "plans_mean", "gave_up")
 
 
-def reference_rows(env_id: str, seeds: Iterable[int], fail_probs: Iterable[float], bot_episodes: int,
+def reference_rows(env_id: str, seeds: Iterable[int], fail_probs: Iterable[float], episodes: int,
                    progress: bool = True) -> list[dict]:
-    """The optimum's and the bot's rows for every world ``seeds`` generates and every fail_prob."""
+    """The references' rows for every world ``seeds`` generates and every fail_prob."""
     seeds, fail_probs = [int(s) for s in seeds], [float(p) for p in fail_probs]
     rows = []
     for seed in tqdm(seeds, desc=f"{env_id} references", unit="world", disable=not progress):
@@ -36,14 +40,16 @@ def reference_rows(env_id: str, seeds: Iterable[int], fail_probs: Iterable[float
         for p in fail_probs:
             opt, _ = mdp.solve(p)
             rows.append(dict(env=env_id, seed=seed, fail_prob=p, method=OPTIMUM, episodes=0, success=opt.success,
-                             reward=opt.ret, steps=opt.steps, bot_errors=0, states=len(mdp)))
-            eps = [bot_episode(env_id, seed, p, failure_seed=k) for k in range(bot_episodes)]
-            won = [e.steps for e in eps if e.success]
-            rows.append(dict(env=env_id, seed=seed, fail_prob=p, method=BOT, episodes=len(eps),
-                             success=float(np.mean([e.success for e in eps])),
-                             reward=float(np.mean([e.reward for e in eps])),
-                             steps=float(np.mean(won)) if won else float("nan"),
-                             bot_errors=sum(bool(e.error) for e in eps), states=len(mdp)))
+                             reward=opt.ret, steps=opt.steps, plans=0.0, gave_up=0, states=len(mdp)))
+            for method, play in POLICIES.items():
+                eps = [play(env_id, seed, p, failure_seed=k) for k in range(episodes)]
+                won = [e.steps for e in eps if e.success]
+                rows.append(dict(env=env_id, seed=seed, fail_prob=p, method=method, episodes=len(eps),
+                                 success=float(np.mean([e.success for e in eps])),
+                                 reward=float(np.mean([e.reward for e in eps])),
+                                 steps=float(np.mean(won)) if won else float("nan"),
+                                 plans=float(np.mean([e.plans for e in eps])),
+                                 gave_up=sum(bool(e.error) for e in eps), states=len(mdp)))
     return rows
 
 
@@ -59,7 +65,8 @@ def summarise(rows: list[dict]) -> list[dict]:
                         success_mean=float(np.mean([r["success"] for r in rs])),
                         reward_mean=float(np.mean([r["reward"] for r in rs])),
                         steps_mean=float(np.mean(steps)) if steps else float("nan"),
-                        bot_errors=sum(r["bot_errors"] for r in rs)))
+                        plans_mean=float(np.mean([r["plans"] for r in rs])),
+                        gave_up=sum(r["gave_up"] for r in rs)))
     return out
 
 

@@ -5,9 +5,9 @@ exact optimum (:mod:`.optimum`) and MiniGrid's BabyAI bot as a second reference 
 A package of its own beside :mod:`hnsdt.envs` (our simulator) so that the paper's stages, which depend on that
 one, do not rerun for a change here."""
 
-from hnsdt.minigrid.live import ActionFailures, make_env, read_world, snapshot, world_of
+from hnsdt.minigrid.live import ActionFailures, Episode, make_env, read_world, snapshot, world_of
 from hnsdt.minigrid.optimum import Optimum, WorldMDP
 from hnsdt.minigrid.world import Actions, MiniGridError, World, WorldState
 
-__all__ = ["ActionFailures", "Actions", "MiniGridError", "Optimum", "World", "WorldMDP", "WorldState", "make_env",
-           "read_world", "snapshot", "world_of"]
+__all__ = ["ActionFailures", "Actions", "Episode", "MiniGridError", "Optimum", "World", "WorldMDP", "WorldState",
+           "make_env", "read_world", "snapshot", "world_of"]

@@ -16,18 +16,8 @@ then observes.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
-from hnsdt.minigrid.live import make_env, read_world
-from hnsdt.minigrid.world import GOAL, OPEN_DOOR, Actions
-
-
-@dataclass(frozen=True)
-class BotEpisode:
-    success: bool
-    steps: int
-    reward: float
-    error: str = ""  # the bot's exception, when it raised one (the episode counts as failed)
+from hnsdt.minigrid.live import Episode, GaveUp, run_episode
+from hnsdt.minigrid.world import GOAL, OPEN_DOOR, Actions, World, WorldState
 
 
 def _instruction(u, task: str):
@@ -40,35 +30,34 @@ def _instruction(u, task: str):
     return PickupInstr(ObjDesc(u.obj.type, u.obj.color))
 
 
-def bot_episode(env_id: str, seed: int, fail_prob: float = 0.0, failure_seed: int = 0) -> BotEpisode:
-    """One episode of the BabyAI bot on ``env_id``'s world ``seed``, with the failures drawn from
-    ``failure_seed``."""
-    from minigrid.utils.baby_ai_bot import BabyAIBot, GoNextToSubgoal
+class BotPolicy:
+    """The bot on a freshly reset env, one action per :meth:`act`."""
 
-    env = make_env(env_id, fail_prob)
-    try:
-        env.reset(seed=int(seed), options={"failure_seed": int(failure_seed)})
-        world, _ = read_world(env, env_id, seed)
+    def __init__(self, world: World, env):
+        from minigrid.utils.baby_ai_bot import BabyAIBot, GoNextToSubgoal
+
         u = env.unwrapped
         if not hasattr(u, "room_from_pos"):
             u.room_from_pos = lambda x, y: None
         u.instrs = _instruction(u, world.task)
         u.instrs.reset_verifier(env)
-        bot = BabyAIBot(env)
-        if world.task == GOAL:
+        self.bot, self.goal, self.last = BabyAIBot(env), world.task == GOAL, None
+        if self.goal:
             (r, c), = world.goals
-            bot.stack = [GoNextToSubgoal(bot, (c, r))]
-        action, steps = None, 0
-        while True:
-            try:
-                action = bot.replan(action)
-            except Exception as exc:  # the bot gives up (e.g. an assertion in its planner): a failed episode
-                return BotEpisode(False, steps, 0.0, f"{type(exc).__name__}: {exc}"[:200])
-            if action == Actions.done and world.task == GOAL:
-                action = Actions.forward  # the last step of "go to the goal": onto it
-            _, reward, terminated, truncated, _ = env.step(action)
-            steps += 1
-            if terminated or truncated:
-                return BotEpisode(bool(terminated and reward > 0), steps, float(reward))
-    finally:
-        env.close()
+            self.bot.stack = [GoNextToSubgoal(self.bot, (c, r))]
+
+    def act(self, state: WorldState) -> int:
+        try:
+            action = self.bot.replan(self.last)
+        except Exception as exc:  # the bot gives up (e.g. an assertion in its planner): a failed episode
+            raise GaveUp(f"{type(exc).__name__}: {exc}") from exc
+        if action == Actions.done and self.goal:
+            action = Actions.forward  # the last step of "go to the goal": onto it
+        self.last = action
+        return int(action)
+
+
+def bot_episode(env_id: str, seed: int, fail_prob: float = 0.0, failure_seed: int = 0) -> Episode:
+    """One episode of the BabyAI bot on ``env_id``'s world ``seed``, with the failures drawn from
+    ``failure_seed``."""
+    return run_episode(env_id, seed, fail_prob, failure_seed, BotPolicy)

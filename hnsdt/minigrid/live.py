@@ -7,7 +7,8 @@ MiniGrid's own stepping and :meth:`World.step` can be compared state for state.
 
 from __future__ import annotations
 
-from typing import Any
+from dataclasses import dataclass
+from typing import Any, Callable
 
 import gymnasium as gym
 import numpy as np
@@ -153,6 +154,42 @@ def _cell_of(obj, u) -> tuple[int, int]:
         if cell is obj:
             return divmod(i, u.width)
     return GONE
+
+
+@dataclass(frozen=True)
+class Episode:
+    success: bool
+    steps: int
+    reward: float  # MiniGrid's
+    plans: int = 0  # planner calls (the symbolic agent)
+    error: str = ""  # why the policy gave up, when it did (the episode counts as failed)
+
+
+class GaveUp(RuntimeError):
+    """A policy that cannot go on (the BabyAI bot's own errors, a planner with no plan): a failed episode."""
+
+
+def run_episode(env_id: str, seed: int, fail_prob: float, failure_seed: int,
+                make_policy: Callable[[World, gym.Env], Any]) -> Episode:
+    """One episode of ``make_policy(world, env)`` (an object with ``act(state) -> action`` and optionally a
+    ``plans`` count) on ``env_id``'s world ``seed``, with the failures drawn from ``failure_seed``."""
+    env = make_env(env_id, fail_prob)
+    try:
+        env.reset(seed=int(seed), options={"failure_seed": int(failure_seed)})
+        world, live = read_world(env, env_id, seed)
+        policy = make_policy(world, env)
+        steps = 0
+        while True:
+            try:
+                action = policy.act(snapshot(world, env, live))
+            except GaveUp as exc:
+                return Episode(False, steps, 0.0, getattr(policy, "plans", 0), str(exc)[:200])
+            _, reward, terminated, truncated, _ = env.step(action)
+            steps += 1
+            if terminated or truncated:
+                return Episode(bool(terminated and reward > 0), steps, float(reward), getattr(policy, "plans", 0))
+    finally:
+        env.close()
 
 
 def world_of(env_id: str, seed: int) -> World:

@@ -1,5 +1,5 @@
-"""Stage `minigrid_reference`: the exact optimum and the BabyAI bot on one of MiniGrid's own worlds
-(``minigrid.envs.<name>``), every test seed and fail_prob."""
+"""Stage `minigrid_reference`: the exact optimum, the BabyAI bot and the symbolic agent on one of MiniGrid's own
+worlds (``minigrid.envs.<name>``), every test seed and fail_prob."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ def minigrid_reference(params: Params, env: str, out: Path) -> Path:
         raise params.error(f"minigrid.envs has no {env!r} (it has {', '.join(section.envs)})")
     env_id = section.envs[env].id
     check_id(env_id)
-    rows = reference_rows(env_id, section.test_seeds.seeds, section.fail_probs, section.bot_episodes)
+    rows = reference_rows(env_id, section.test_seeds.seeds, section.fail_probs, section.episodes)
     with atomic_dir(out) as work:
         work.mkdir(parents=True)
         (work / "reference.csv").write_text(to_csv(rows, ROW_COLUMNS))
