@@ -219,3 +219,47 @@ def test_the_symbolic_agent_solves_minigrid_worlds_in_minigrids_own_env(env_id):
         if env_id != "MiniGrid-BlockedUnlockPickup-v0":  # (its optimum takes 10 s a world)
             best = WorldMDP(world_of(env_id, seed)).solve(0.0)[0].steps
             assert best <= calm.steps <= 1.3 * best
+
+
+@pytest.mark.parametrize("env_id", ["MiniGrid-DoorKey-8x8-v0", "MiniGrid-Unlock-v0", "MiniGrid-UnlockPickup-v0",
+                                    "MiniGrid-KeyCorridorS3R1-v0", "MiniGrid-KeyCorridorS3R3-v0",
+                                    "MiniGrid-BlockedUnlockPickup-v0"])
+def test_pddl_export_solved_by_pyperplan_with_the_same_plan_length(tmp_path, env_id):
+    """pyperplan's breadth-first search on the exported domain finds plans of as many operators as ours, from
+    each world's start (three worlds) and from the middle of an episode (the symbolic agent's state after 9
+    steps in MiniGrid's env)."""
+    import logging
+
+    from pyperplan import planner as pyperplan
+
+    from hnsdt.minigrid.controllers import SymbolicAgent
+    from hnsdt.minigrid.operators import PlanState
+    from hnsdt.minigrid.pddl import write_pddl
+    from hnsdt.minigrid.planner import plan
+
+    logging.disable(logging.CRITICAL)  # (pyperplan logs every search at INFO)
+    try:
+        for seed in range(3):
+            env = make_env(env_id)
+            env.reset(seed=seed)
+            world, live = read_world(env, env_id, seed)
+            agent = SymbolicAgent(world, "bfs")
+            for _ in range(9):
+                env.step(agent.act(snapshot(world, env, live)))
+            for state in (world.start, snapshot(world, env, live)):
+                domain, problem = write_pddl(world, tmp_path / f"{seed}", state)
+                solution = pyperplan.search_plan(str(domain), str(problem), pyperplan.SEARCHES["bfs"], None)
+                assert solution is not None and len(solution) == len(plan(world, PlanState.of(state), "bfs"))
+    finally:
+        logging.disable(logging.NOTSET)
+
+
+def test_hnsdt_plan_and_pddl_take_a_minigrid_id(tmp_path):
+    from conftest import hnsdt_cli
+
+    out = hnsdt_cli("plan", "--env", "MiniGrid-UnlockPickup-v0", "--seed", "1")
+    assert out.returncode == 0 and "Drop" in out.stdout and "PickUp(" in out.stdout, out.stderr
+    out = hnsdt_cli("pddl", "--env", "MiniGrid-DoorKey-5x5-v0", "--out", str(tmp_path))
+    assert out.returncode == 0 and "(:goal (at c-" in (tmp_path / "problem.pddl").read_text()
+    bad = hnsdt_cli("plan", "--env", "MiniGrid-Empty-5x5-v0")
+    assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "no key and locked door" in bad.stderr

@@ -33,8 +33,36 @@ def cmd_envs(args) -> None:
         print(f"\nlayout {name} ({lay.shape[0]}x{lay.shape[1]}):\n{lay.text}", end="")
 
 
+def _minigrid_world(args):
+    """A MiniGrid id's world for ``--seed`` (stepped by MiniGrid: hnsdt.minigrid), or None for our envs."""
+    if not args.env.startswith("MiniGrid-"):
+        return None
+    from hnsdt.minigrid import world_of
+
+    return world_of(args.env, args.seed)
+
+
+def _plan_minigrid(world, mode: str) -> None:
+    from hnsdt.minigrid.abstraction import phi
+    from hnsdt.minigrid.operators import PlanState
+    from hnsdt.minigrid.planner import plan
+
+    ops = plan(world, PlanState.of(world.start), mode)
+    print(f"{world.name} (stepped by MiniGrid), planner mode {mode}, from {sorted(phi(world, world.start))}")
+    print(f"{'#':>2}  {'operator':<24} {'cell':>8}  {'cost':>4}")
+    for i, op in enumerate(ops, 1):
+        print(f"{i:>2}  {op.name(world):<24} {str(op.cell):>8}  {op.cost:>4}")
+    print(f"{len(ops)} operators, {sum(op.cost for op in ops)} cells walked or acted on (turns not counted)")
+
+
 def cmd_plan(args) -> None:
     import numpy as np
+
+    if (world := _minigrid_world(args)) is not None:
+        if args.operators != "goto" or args.state or args.layout:
+            raise ValueError("a MiniGrid world plans over its own operators from its start: no --operators move, "
+                             "--state or --layout")
+        return _plan_minigrid(world, args.mode)
 
     from hnsdt.symbolic import SymbolicState, plan, plan_cost, psi
 
@@ -61,6 +89,12 @@ def cmd_plan(args) -> None:
 def cmd_pddl(args) -> None:
     from hnsdt.symbolic.pddl import write_pddl
 
+    if (world := _minigrid_world(args)) is not None:
+        from hnsdt.minigrid.pddl import write_pddl as write_minigrid_pddl
+
+        domain, problem = write_minigrid_pddl(world, args.out)
+        print(f"wrote {domain} and {problem}")
+        return
     _, layout, _ = _resolve_env(args)
     domain, problem = write_pddl(layout, args.out, operators=args.operators)
     print(f"wrote {domain} and {problem}")

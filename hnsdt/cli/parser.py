@@ -41,7 +41,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_envs)
 
     p = sub.add_parser("plan", help="print the symbolic plan and its sub-goals for an environment")
-    p.add_argument("--env", required=True, help="env name from params.yaml (keydoor) or a gymnasium id")
+    p.add_argument("--env", required=True, help="env name from params.yaml (keydoor), a gymnasium id, or a "
+                   "MiniGrid id (its own world, stepped by MiniGrid)")
     p.add_argument("--layout", help="override the layout: built-in name, file path or grid text")
     p.add_argument("--mode", choices=["bfs", "cost"], default="bfs",
                    help="bfs: fewest operators (the paper's planner); cost: fewest steps (default: bfs)")
@@ -49,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="goto: GoTo macro-operators (ours); move: the paper's one-cell Move operators "
                    "(default: goto)")
     p.add_argument("--state", help="plan from this observation, e.g. 4,0,1,0 (row,col,flags...)")
+    p.add_argument("--seed", type=int, default=0, help="a MiniGrid id (MiniGrid-DoorKey-8x8-v0): the world its "
+                   "reset with this seed makes (default: 0)")
     p.set_defaults(func=cmd_plan)
 
     p = sub.add_parser("pddl", help="export the environment's domain and problem as PDDL")
@@ -57,6 +60,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", required=True, help="output folder for domain.pddl and problem.pddl")
     p.add_argument("--operators", choices=["goto", "move"], default="goto",
                    help="goto: GoTo macro-operators (ours); move: the paper's one-cell Move operators")
+    p.add_argument("--seed", type=int, default=0, help="a MiniGrid id: the world its reset with this seed makes")
     p.set_defaults(func=cmd_pddl)
 
     p = sub.add_parser("collect", help="collect exploration data into a LeRobot dataset (the `collect` stage)")
