@@ -1,7 +1,9 @@
-"""DVC stage `minigrid_reference`: the exact optimum and the BabyAI bot on one of MiniGrid's own worlds
-(hnsdt.stages.minigrid_reference).
+"""DVC stages `minigrid_reference` and `minigrid_collect` on one of MiniGrid's own worlds: the references (the exact
+optimum, the symbolic agent, the BabyAI bot) and the learners' dataset (hnsdt.stages.minigrid_reference,
+hnsdt.stages.minigrid_collect).
 
 Usage: python pipeline/minigrid_worlds.py reference --env NAME --out minigrid/NAME/reference
+       python pipeline/minigrid_worlds.py collect --env NAME --out minigrid/NAME/dataset
 NAME is a key of params.yaml's minigrid.envs. (Not pipeline/minigrid.py: the script's folder comes first on
 sys.path, and that name would hide the minigrid package.)
 """
@@ -15,12 +17,13 @@ from pathlib import Path
 runpy.run_path(str(Path(__file__).resolve().parents[1] / "hnsdt/core/reproducible.py"))["pin_process"]()
 
 from hnsdt.stages.common import run  # noqa: E402
+from hnsdt.stages.minigrid_collect import minigrid_collect  # noqa: E402
 from hnsdt.stages.minigrid_reference import minigrid_reference  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("step", choices=["reference"])
+    parser.add_argument("step", choices=["reference", "collect"])
     parser.add_argument("--env", required=True)
     parser.add_argument("--out", required=True, type=Path)
     args = parser.parse_args()
-    sys.exit(run(minigrid_reference, env=args.env, out=args.out))
+    sys.exit(run(minigrid_reference if args.step == "reference" else minigrid_collect, env=args.env, out=args.out))

@@ -263,3 +263,41 @@ def test_hnsdt_plan_and_pddl_take_a_minigrid_id(tmp_path):
     assert out.returncode == 0 and "(:goal (at c-" in (tmp_path / "problem.pddl").read_text()
     bad = hnsdt_cli("plan", "--env", "MiniGrid-Empty-5x5-v0")
     assert bad.returncode == 2 and bad.stderr.strip().count("\n") == 0 and "no key and locked door" in bad.stderr
+
+
+def test_a_minigrid_dataset_is_read_by_stock_lerobot_with_its_sub_goal_segmentation(tmp_path):
+    """Noisy symbolic-agent episodes on DoorKey-5x5 as a LeRobot dataset: stock LeRobotDataset reads every frame;
+    each frame's task is its operator's name and its sub-goal kind that operator's; the operators of a successful
+    episode end with GoTo(goal); the same settings write the same bytes."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset
+
+    from hnsdt.data.card import data_md5
+    from hnsdt.data.minigrid_dataset import write_minigrid_dataset
+    from hnsdt.minigrid.collect import SUBGOAL_NAMES, collect_episodes
+
+    meta = dict(env_id="MiniGrid-DoorKey-5x5-v0", world_seeds=[0, 1, 2], fail_probs=[0.0, 0.3], epsilon=0.2, seed=4,
+                license="apache-2.0")
+    roots = []
+    for copy in ("a", "b"):
+        episodes = collect_episodes("MiniGrid-DoorKey-5x5-v0", [0, 1, 2], [0.0, 0.3], 1, 0.2, 4)
+        roots.append(write_minigrid_dataset(tmp_path / copy, "local/dk5", episodes, 10, meta))
+    assert data_md5(roots[0]) == data_md5(roots[1])
+    ds = LeRobotDataset("local/dk5", root=roots[0])
+    assert ds.num_episodes == 6 and ds.num_frames == sum(len(e["actions"]) for e in episodes)
+    def kind_of(task: str) -> str:
+        named = {"none": "none", "Drop": "drop", "GoTo(goal)": "goto_goal"}
+        if task in named:
+            return named[task]
+        if task.startswith("GoTo("):
+            return "goto_door" if task.endswith(" door)") else "goto_object"
+        return "pickup" if task.startswith("PickUp(") else "open"
+
+    for i in range(ds.num_frames):
+        f = ds[i]
+        assert SUBGOAL_NAMES[int(f["subgoal"])] == kind_of(f["task"])
+        assert f["observation.view"].shape == (147,) and 0 <= int(f["action"]) <= 6
+    ends = [e["names"][-1] for e in episodes if e["success"]]
+    assert ends and set(ends) == {"GoTo(goal)"} and sum(e["success"] for e in episodes) >= 5
+    with pytest.raises(ValueError, match="no episodes"):
+        write_minigrid_dataset(tmp_path / "empty", "local/x", [], 10, meta)
+    assert not (tmp_path / "empty").exists()

@@ -45,7 +45,7 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     from hnsdt.data.lerobot_io import open_dataset
 
     ran = ran_stages(first_run[0])
-    assert ran == ({"collect@keydoor", "evaluate", "report", "minigrid_reference@doorkey8"}
+    assert ran == ({"collect@keydoor", "evaluate", "report", "minigrid_reference@doorkey8", "minigrid_collect@doorkey8"}
                    | {f"{STAGES[m]}@keydoor-{m}" for m in STAGES} | UNSEEN_STAGES)
     assert open_dataset(repo_copy / "data/datasets/keydoor").meta.total_episodes == 9
     for method in STAGES:
@@ -105,6 +105,8 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     # MiniGrid's own worlds: the optimum and the bot on the tiny run's one world, in the report
     assert (repo_copy / "minigrid/doorkey8/reference/summary.csv").is_file()
     assert "## MiniGrid's own worlds" in report and "| MiniGrid-DoorKey-8x8-v0 | 0.2 | 1.000 |" in report
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset  # (stock, offline: 2 worlds x 1 fail_prob)
+    assert LeRobotDataset("local/minigrid-doorkey8", root=repo_copy / "minigrid/doorkey8/dataset").num_episodes == 2
     rrds = sorted((repo_copy / "recordings").rglob("*.rrd"))
     verify = subprocess.run([str(Path(sys.executable).parent / "rerun"), "rrd", "verify", *map(str, rrds)],
                             capture_output=True, text=True)  # every recording, by rerun's own verifier

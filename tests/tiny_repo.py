@@ -76,6 +76,7 @@ def tiny_params(path: Path) -> None:
     params["minigrid"].update(envs={n: params["minigrid"]["envs"][n] for n in first_world},
                               test_seeds={"first": params["minigrid"]["test_seeds"]["first"], "count": 1},
                               fail_probs=[0.2], episodes=1)
+    params["minigrid"]["collect"].update(train_seeds={"first": 0, "count": 2})
     first = list(params.get("unseen_experiments", {}))[:1]  # one further experiment runs its stage kind
     params["unseen_experiments"] = {name: params["unseen_experiments"][name] for name in first}
     for changes in params["unseen_experiments"].values():  # the tiny knobs above, one seed, episodes that end

@@ -290,6 +290,12 @@ class SeedRange(Section):
         return list(range(self.first, self.first + self.count))
 
 
+class MiniGridCollectParams(Section):
+    train_seeds: SeedRange = Field(description="MiniGrid's reset seeds of the training worlds (apart from test_seeds)")
+    episodes_per_world: PositiveInt = Field(1, description="noisy symbolic-agent episodes per world and fail_prob")
+    epsilon: Probability = Field(0.1, description="the share of random actions among the symbolic agent's")
+
+
 class MiniGridParams(Section):
     envs: dict[str, MiniGridEnvParams] = Field(min_length=1, description="MiniGrid's own worlds, one stage per "
                                                "name (minigrid_reference@<name>, outputs under minigrid/<name>)")
@@ -297,6 +303,14 @@ class MiniGridParams(Section):
     fail_probs: list[Probability] = Field(min_length=1, description="the paper's action-failure probabilities")
     episodes: PositiveInt = Field(5, description="episodes of the BabyAI bot and of the symbolic agent per world "
                                   "and fail_prob, each with its own failure draws")
+    collect: MiniGridCollectParams | None = Field(None, description="the learners' datasets, one per world "
+                                                  "(minigrid_collect@<name>, minigrid/<name>/dataset)")
+
+    @model_validator(mode="after")
+    def _apart(self):
+        if self.collect is not None and set(self.collect.train_seeds.seeds) & set(self.test_seeds.seeds):
+            raise ValueError("collect.train_seeds overlaps test_seeds: a world trained on would be evaluated")
+        return self
 
     @field_validator("envs")
     @classmethod
