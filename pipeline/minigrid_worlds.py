@@ -17,8 +17,6 @@ from pathlib import Path
 runpy.run_path(str(Path(__file__).resolve().parents[1] / "hnsdt/core/reproducible.py"))["pin_process"]()
 
 from hnsdt.stages.common import run  # noqa: E402
-from hnsdt.stages.minigrid_collect import minigrid_collect  # noqa: E402
-from hnsdt.stages.minigrid_reference import minigrid_reference  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -26,4 +24,8 @@ if __name__ == "__main__":
     parser.add_argument("--env", required=True)
     parser.add_argument("--out", required=True, type=Path)
     args = parser.parse_args()
-    sys.exit(run(minigrid_reference if args.step == "reference" else minigrid_collect, env=args.env, out=args.out))
+    if args.step == "reference":  # (each stage imports its own module only: an edit to the other's reruns neither)
+        from hnsdt.stages.minigrid_reference import minigrid_reference as stage
+    else:
+        from hnsdt.stages.minigrid_collect import minigrid_collect as stage
+    sys.exit(run(stage, env=args.env, out=args.out))

@@ -17,11 +17,12 @@ from collections.abc import Iterable
 import numpy as np
 from tqdm import tqdm
 
+from hnsdt.core.methods import REFERENCE
 from hnsdt.minigrid import WorldMDP, world_of
 from hnsdt.minigrid.bot import bot_episode
 from hnsdt.minigrid.controllers import symbolic_episode
 
-OPTIMUM, BOT, SYMBOLIC = "optimum", "babyai_bot", "symbolic"
+OPTIMUM, BOT, SYMBOLIC = "optimum", "babyai_bot", REFERENCE  # (the registry's symbolic method, on MiniGrid)
 POLICIES = {BOT: bot_episode, SYMBOLIC: symbolic_episode}  # the references played in MiniGrid's env
 ROW_COLUMNS = ("env", "seed", "fail_prob", "method", "episodes", "success", "reward", "steps", "plans", "gave_up",
                "states")
