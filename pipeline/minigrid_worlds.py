@@ -3,6 +3,7 @@ optimum, the symbolic agent, the BabyAI bot) and the learners' dataset (hnsdt.st
 hnsdt.stages.minigrid_collect).
 
 Usage: python pipeline/minigrid_worlds.py reference --env NAME --out minigrid/NAME/reference
+           [--recordings minigrid/NAME/recordings]
        python pipeline/minigrid_worlds.py collect --env NAME --out minigrid/NAME/dataset
 NAME is a key of params.yaml's minigrid.envs. (Not pipeline/minigrid.py: the script's folder comes first on
 sys.path, and that name would hide the minigrid package.)
@@ -23,9 +24,12 @@ if __name__ == "__main__":
     parser.add_argument("step", choices=["reference", "collect"])
     parser.add_argument("--env", required=True)
     parser.add_argument("--out", required=True, type=Path)
+    parser.add_argument("--recordings", type=Path, help="reference: one .rrd and .mcap per played reference and "
+                        "fail_prob here")
     args = parser.parse_args()
     if args.step == "reference":  # (each stage imports its own module only: an edit to the other's reruns neither)
         from hnsdt.stages.minigrid_reference import minigrid_reference as stage
     else:
         from hnsdt.stages.minigrid_collect import minigrid_collect as stage
-    sys.exit(run(stage, env=args.env, out=args.out))
+    extra = {"recorded": args.recordings} if args.step == "reference" else {}
+    sys.exit(run(stage, env=args.env, out=args.out, **extra))

@@ -105,6 +105,8 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     # MiniGrid's own worlds: the optimum and the bot on the tiny run's one world, in the report
     assert (repo_copy / "minigrid/doorkey8/reference/summary.csv").is_file()
     assert "## MiniGrid's own worlds" in report and "| MiniGrid-DoorKey-8x8-v0 | 0.2 | 1.000 |" in report
+    assert sorted(p.name for p in (repo_copy / "minigrid/doorkey8/recordings").iterdir()) == [
+        "babyai_bot_fp0.2.mcap", "babyai_bot_fp0.2.rrd", "symbolic_fp0.2.mcap", "symbolic_fp0.2.rrd"]
     from lerobot.datasets.lerobot_dataset import LeRobotDataset  # (stock, offline: 2 worlds x 1 fail_prob)
     assert LeRobotDataset("local/minigrid-doorkey8", root=repo_copy / "minigrid/doorkey8/dataset").num_episodes == 2
     rrds = sorted((repo_copy / "recordings").rglob("*.rrd"))

@@ -54,6 +54,27 @@ def reference_rows(env_id: str, seeds: Iterable[int], fail_probs: Iterable[float
     return rows
 
 
+def recordings(env_id: str, seed: int, fail_probs: Iterable[float], meta: dict | None = None) -> dict[str, bytes]:
+    """One recorded episode (failure stream 0) of each played reference on world ``seed`` per fail_prob, as
+    ``{file name: bytes}``: ``<method>_fp<p>.rrd`` and ``.mcap``."""
+    from hnsdt.logs.minigrid_log import MiniGridRecord, recording_files
+    from hnsdt.minigrid.bot import BotPolicy
+    from hnsdt.minigrid.controllers import SymbolicAgent
+    from hnsdt.minigrid.live import run_episode
+
+    policies = {SYMBOLIC: lambda world, env: SymbolicAgent(world), BOT: BotPolicy}
+    files = {}
+    for p in fail_probs:
+        for method, make in policies.items():
+            trace: list = []
+            ep = run_episode(env_id, seed, p, 0, make, trace)
+            rec = MiniGridRecord(f"{method}/{env_id}@{seed}/fp{p:g}/ep0", trace, ep.success,
+                                 dict(meta or {}, method=method, env=env_id, world_seed=int(seed), fail_prob=float(p)))
+            for suffix, data in recording_files(rec).items():
+                files[f"{method}_fp{p:g}{suffix}"] = data
+    return files
+
+
 def summarise(rows: list[dict]) -> list[dict]:
     """Per (env, fail_prob, method): the mean over its worlds."""
     groups: dict[tuple, list[dict]] = {}

@@ -165,31 +165,65 @@ class Episode:
     error: str = ""  # why the policy gave up, when it did (the episode counts as failed)
 
 
+@dataclass(frozen=True)
+class Step:
+    """One step of a traced episode, what its recording shows: MiniGrid's own drawing of the world before the
+    action (the agent a triangle pointing where it faces), what the agent carries and faces, the operator it
+    serves (a planning policy's), the action and its reward."""
+
+    frame: Any  # (H, W, 3) uint8
+    direction: int
+    carrying: str  # "<color> <kind>" or ""
+    operator: str  # "" for a policy without a plan
+    action: int
+    reward: float
+    move_failed: bool
+
+
 class GaveUp(RuntimeError):
     """A policy that cannot go on (the BabyAI bot's own errors, a planner with no plan): a failed episode."""
 
 
 def run_episode(env_id: str, seed: int, fail_prob: float, failure_seed: int,
-                make_policy: Callable[[World, gym.Env], Any]) -> Episode:
+                make_policy: Callable[[World, gym.Env], Any], trace: list[Step] | None = None) -> Episode:
     """One episode of ``make_policy(world, env)`` (an object with ``act(state) -> action`` and optionally a
-    ``plans`` count) on ``env_id``'s world ``seed``, with the failures drawn from ``failure_seed``."""
-    env = make_env(env_id, fail_prob)
+    ``plans`` count and a ``plan`` list of operators) on ``env_id``'s world ``seed``, with the failures drawn from
+    ``failure_seed``; with a ``trace`` list, each step's :class:`Step` is appended to it and the final frame
+    closes it (a step with action -1)."""
+    env = make_env(env_id, fail_prob, **({"render_mode": "rgb_array", "tile_size": 16} if trace is not None else {}))
     try:
         env.reset(seed=int(seed), options={"failure_seed": int(failure_seed)})
         world, live = read_world(env, env_id, seed)
         policy = make_policy(world, env)
         steps = 0
         while True:
+            state = snapshot(world, env, live)
             try:
-                action = policy.act(snapshot(world, env, live))
+                action = policy.act(state)
             except GaveUp as exc:
+                _close(trace, env, world, state)
                 return Episode(False, steps, 0.0, getattr(policy, "plans", 0), str(exc)[:200])
-            _, reward, terminated, truncated, _ = env.step(action)
+            frame = env.render() if trace is not None else None
+            _, reward, terminated, truncated, info = env.step(action)
             steps += 1
+            if trace is not None:
+                plan = getattr(policy, "plan", None)
+                trace.append(Step(frame, state.direction, _carried(world, state), plan[0].name(world) if plan else "",
+                                  int(action), float(reward), bool(info["move_failed"])))
             if terminated or truncated:
+                _close(trace, env, world, snapshot(world, env, live))
                 return Episode(bool(terminated and reward > 0), steps, float(reward), getattr(policy, "plans", 0))
     finally:
         env.close()
+
+
+def _carried(world: World, state: WorldState) -> str:
+    return world.objects[state.carrying].name if state.carrying >= 0 else ""
+
+
+def _close(trace: list[Step] | None, env, world: World, state: WorldState) -> None:
+    if trace is not None:
+        trace.append(Step(env.render(), state.direction, _carried(world, state), "", -1, 0.0, False))
 
 
 def world_of(env_id: str, seed: int) -> World:

@@ -11,10 +11,12 @@ from hnsdt.core.fileio import atomic_dir
 from hnsdt.stages.common import provenance
 
 
-def minigrid_reference(params: Params, env: str, out: Path) -> Path:
+def minigrid_reference(params: Params, env: str, out: Path, recorded: Path | None = None) -> Path:
     """``out``: ``reference.csv`` (per world, fail_prob and reference), ``summary.csv`` (mean over the worlds)
-    and ``provenance.json``."""
-    from hnsdt.evaluation.minigrid import ROW_COLUMNS, SUMMARY_COLUMNS, reference_rows, summarise, to_csv
+    and ``provenance.json``; ``recorded``: a folder of one rerun and one MCAP recording per played reference and
+    fail_prob, on the first test world (their own output: rerun's bytes vary from run to run)."""
+    from hnsdt.evaluation.minigrid import (ROW_COLUMNS, SUMMARY_COLUMNS, recordings, reference_rows, summarise,
+                                           to_csv)
     from hnsdt.minigrid.live import check_id
 
     section = params.need("minigrid")
@@ -29,5 +31,12 @@ def minigrid_reference(params: Params, env: str, out: Path) -> Path:
         (work / "summary.csv").write_text(to_csv(summarise(rows), SUMMARY_COLUMNS))
         (work / "provenance.json").write_text(json.dumps({"env": env, "id": env_id, **provenance(params)},
                                                          indent=1) + "\n")
+    if recorded is not None:
+        files = recordings(env_id, section.test_seeds.first, section.fail_probs, provenance(params))
+        with atomic_dir(recorded) as work:
+            work.mkdir(parents=True)
+            for name, data in files.items():
+                (work / name).write_bytes(data)
+        print(f"wrote {len(files)} recordings to {recorded}")
     print(f"wrote {out}")
     return Path(out)
