@@ -21,6 +21,8 @@ ENV = dict(os.environ, PATH=f"{BIN}:{os.environ['PATH']}", PYTHONUNBUFFERED="1")
 STAGES = {m: METHODS[m].stage for m in LEARNED}  # learned method of the paper protocol -> its DVC stage
 _GENERALISATION = yaml.safe_load((REPO / "params.yaml").read_text())["generalisation"]
 UNSEEN = _GENERALISATION["methods"] + _GENERALISATION["baselines"]  # learned methods of the unseen-layout experiment
+VARYING_OUTS = {"evaluate:recordings",  # outputs whose bytes differ from run to run (rerun's row ids are time-based)
+                "minigrid_reference@doorkey8:minigrid/doorkey8/recordings"}
 GIT_TRACKED_OUTS = {"metrics/summary.csv", "metrics/metrics.json", "metrics/headline"}  # outputs with
 # `cache: false`: in git, and changed by a run with other params
 
