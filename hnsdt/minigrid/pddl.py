@@ -129,13 +129,12 @@ def problem_pddl(world: World, state: WorldState | None = None) -> str:
     spots = places(world, state)
     init = [f"(at {_place(state.cell)})"]
     init.append("(hands-free)" if state.carrying < 0 else f"(carrying {_object(world, state.carrying)})")
-    object_cells = {c: i for i, c in enumerate(state.objects) if c[0] >= 0}
+    lying = [c for c in state.objects if c[0] >= 0]  # the objects' cells: places for pickup's ?q
     for i, c in enumerate(state.objects):
         if c[0] >= 0:
             init.append(f"(lies {_object(world, i)} {_place(c)})")
         else:
             init.append(f"(moved {_object(world, i)})")
-    lying = [c for c in object_cells]  # an object's cell is a place for pickup's ?q
     for p in spots:
         for c in lying:
             if beside(p, c):
