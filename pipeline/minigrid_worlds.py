@@ -1,10 +1,12 @@
-"""DVC stages `minigrid_reference` and `minigrid_collect` on one of MiniGrid's own worlds: the references (the exact
-optimum, the symbolic agent, the BabyAI bot) and the learners' dataset (hnsdt.stages.minigrid_reference,
-hnsdt.stages.minigrid_collect).
+"""DVC stages `minigrid_reference`, `minigrid_collect` and `minigrid_learn` on one of MiniGrid's own worlds: the
+references (the exact optimum, the symbolic agent, the BabyAI bot), the learners' dataset, and the decision
+transformers trained on it and played (hnsdt.stages.minigrid_reference, .minigrid_collect, .minigrid_learn).
 
 Usage: python pipeline/minigrid_worlds.py reference --env NAME --out minigrid/NAME/reference
            [--recordings minigrid/NAME/recordings]
        python pipeline/minigrid_worlds.py collect --env NAME --out minigrid/NAME/dataset
+       python pipeline/minigrid_worlds.py learn --env NAME --dataset minigrid/NAME/dataset --out minigrid/NAME/learned
+           [--recordings minigrid/NAME/learned_recordings]
 NAME is a key of params.yaml's minigrid.envs. (Not pipeline/minigrid.py: the script's folder comes first on
 sys.path, and that name would hide the minigrid package.)
 """
@@ -21,15 +23,22 @@ from hnsdt.stages.common import run  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("step", choices=["reference", "collect"])
+    parser.add_argument("step", choices=["reference", "collect", "learn"])
     parser.add_argument("--env", required=True)
     parser.add_argument("--out", required=True, type=Path)
-    parser.add_argument("--recordings", type=Path, help="reference: one .rrd and .mcap per played reference and "
-                        "fail_prob here")
+    parser.add_argument("--dataset", type=Path, help="learn: the world's dataset (minigrid_collect's)")
+    parser.add_argument("--recordings", type=Path, help="reference, learn: one .rrd and .mcap per played method "
+                        "and fail_prob here")
     args = parser.parse_args()
-    if args.step == "reference":  # (each stage imports its own module only: an edit to the other's reruns neither)
+    extra = {}
+    if args.step == "reference":  # (each stage imports its own module only: an edit to another's reruns none)
         from hnsdt.stages.minigrid_reference import minigrid_reference as stage
-    else:
+        extra = {"recorded": args.recordings}
+    elif args.step == "collect":
         from hnsdt.stages.minigrid_collect import minigrid_collect as stage
-    extra = {"recorded": args.recordings} if args.step == "reference" else {}
+    else:
+        from hnsdt.stages.minigrid_learn import minigrid_learn as stage
+        if args.dataset is None:
+            parser.error("learn needs --dataset")
+        extra = {"dataset": args.dataset, "recorded": args.recordings}
     sys.exit(run(stage, env=args.env, out=args.out, **extra))

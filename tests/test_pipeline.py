@@ -45,7 +45,8 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
     from hnsdt.data.lerobot_io import open_dataset
 
     ran = ran_stages(first_run[0])
-    assert ran == ({"collect@keydoor", "evaluate", "report", "minigrid_reference@doorkey8", "minigrid_collect@doorkey8"}
+    assert ran == ({"collect@keydoor", "evaluate", "report", "minigrid_reference@doorkey8", "minigrid_collect@doorkey8",
+                    "minigrid_learn@doorkey8"}
                    | {f"{STAGES[m]}@keydoor-{m}" for m in STAGES} | UNSEEN_STAGES)
     assert open_dataset(repo_copy / "data/datasets/keydoor").meta.total_episodes == 9
     for method in STAGES:
@@ -109,6 +110,12 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
         "babyai_bot_fp0.2.mcap", "babyai_bot_fp0.2.rrd", "symbolic_fp0.2.mcap", "symbolic_fp0.2.rrd"]
     from lerobot.datasets.lerobot_dataset import LeRobotDataset  # (stock, offline: 2 worlds x 1 fail_prob)
     assert LeRobotDataset("local/minigrid-doorkey8", root=repo_copy / "minigrid/doorkey8/dataset").num_episodes == 2
+    learned = pd.read_csv(repo_copy / "minigrid/doorkey8/learned/summary.csv")  # both transformers, played
+    assert set(learned.method) == {"hnsdt", "pure_dt", "ppo"} and (learned.seeds == 1).all()
+    assert (repo_copy / "minigrid/doorkey8/learned/models/hnsdt/seed0/model.safetensors").is_file()
+    assert sorted(p.name for p in (repo_copy / "minigrid/doorkey8/learned_recordings").iterdir()) == [
+        "hnsdt_fp0.2.mcap", "hnsdt_fp0.2.rrd", "ppo_fp0.2.mcap", "ppo_fp0.2.rrd", "pure_dt_fp0.2.mcap",
+        "pure_dt_fp0.2.rrd"]
     rrds = sorted((repo_copy / "recordings").rglob("*.rrd"))
     verify = subprocess.run([str(Path(sys.executable).parent / "rerun"), "rrd", "verify", *map(str, rrds)],
                             capture_output=True, text=True)  # every recording, by rerun's own verifier

@@ -22,7 +22,8 @@ STAGES = {m: METHODS[m].stage for m in LEARNED}  # learned method of the paper p
 _GENERALISATION = yaml.safe_load((REPO / "params.yaml").read_text())["generalisation"]
 UNSEEN = _GENERALISATION["methods"] + _GENERALISATION["baselines"]  # learned methods of the unseen-layout experiment
 VARYING_OUTS = {"evaluate:recordings",  # outputs whose bytes differ from run to run (rerun's row ids are time-based)
-                "minigrid_reference@doorkey8:minigrid/doorkey8/recordings"}
+                "minigrid_reference@doorkey8:minigrid/doorkey8/recordings",
+                "minigrid_learn@doorkey8:minigrid/doorkey8/learned_recordings"}
 GIT_TRACKED_OUTS = {"metrics/summary.csv", "metrics/metrics.json", "metrics/headline"}  # outputs with
 # `cache: false`: in git, and changed by a run with other params
 
@@ -79,6 +80,10 @@ def tiny_params(path: Path) -> None:
                               test_seeds={"first": params["minigrid"]["test_seeds"]["first"], "count": 1},
                               fail_probs=[0.2], episodes=1)
     params["minigrid"]["collect"].update(train_seeds={"first": 0, "count": 2})
+    params["minigrid"]["learn"].update(seeds=[0], max_epochs=1, validation_seeds={"first": 50000, "count": 1},
+                                       ppo=dict(params["minigrid"]["learn"]["ppo"], max_frames=2048, eval_every=2048),
+                                       validation_max_steps=20, model=dict(params["minigrid"]["learn"]["model"],
+                                                                           n_layers=1, d_model=32))
     first = list(params.get("unseen_experiments", {}))[:1]  # one further experiment runs its stage kind
     params["unseen_experiments"] = {name: params["unseen_experiments"][name] for name in first}
     for changes in params["unseen_experiments"].values():  # the tiny knobs above, one seed, episodes that end

@@ -19,7 +19,8 @@ from hnsdt.data.collect import POLICIES, STARTS
 from hnsdt.models.windows import FORMULATIONS, LOSS_STEPS
 from hnsdt.envs.generate import FAMILIES
 from hnsdt.core.compute import EXECUTORS
-from hnsdt.core.methods import BASELINES, DT_METHODS, LEARNED, METHODS, OFFLINE_BASELINES, ONLINE_BASELINES
+from hnsdt.core.methods import (BASELINES, DT_METHODS, LEARNED, METHODS, OFFLINE_BASELINES, ONLINE_BASELINES,
+                                 MINIGRID_LEARNERS)
 from hnsdt.symbolic.operators import OPERATOR_SETS
 from hnsdt.symbolic.planner import PLAN_MODES
 
@@ -296,6 +297,44 @@ class MiniGridCollectParams(Section):
     epsilon: Probability = Field(0.1, description="the share of random actions among the symbolic agent's")
 
 
+class MiniGridModelParams(Section):
+    context: PositiveInt = Field(16, description="h: the steps each step attends to (banded attention)")
+    n_layers: PositiveInt = Field(3, description="transformer layers")
+    n_heads: PositiveInt = Field(4, description="attention heads")
+    d_model: PositiveInt = Field(128, description="token width")
+    dropout: float = Field(0.1, ge=0, lt=1, description="dropout in training")
+    cell_dim: PositiveInt = Field(16, description="each view cell's embedding before the 49 are projected")
+
+
+class MiniGridPPOParams(Section):
+    max_frames: PositiveInt = Field(250_000, description="the cap on env steps; it stops at its plateau before")
+    num_envs: PositiveInt = Field(16, description="copies of the env stepped together")
+    rollout_steps: PositiveInt = Field(128, description="steps of every copy per iteration")
+    lr: float = Field(1e-3, gt=0, description="Adam's learning rate")
+    batch_size: PositiveInt = Field(256, description="steps per minibatch")
+    update_epochs: PositiveInt = Field(4, description="passes over each rollout")
+    ent_coef: float = Field(0.01, ge=0, description="entropy bonus")
+    eval_every: PositiveInt = Field(50_000, description="frames between validation measurements")
+    patience: PositiveInt = Field(4, description="measurements without fewer validation steps before stopping")
+
+
+class MiniGridLearnParams(Section):
+    methods: list[Literal[MINIGRID_LEARNERS]] = Field(min_length=1, description="the decision transformers trained on each world's dataset")
+    seeds: list[int] = Field(min_length=1, description="training seeds, each evaluated on every test world")
+    model: MiniGridModelParams = Field(default_factory=MiniGridModelParams)
+    batch_size: PositiveInt = Field(1024, description="steps per gradient step (whole episodes)")
+    lr: float = Field(1e-3, gt=0, description="Adam's learning rate")
+    max_epochs: PositiveInt = Field(30, description="the cap on passes over the dataset")
+    patience: PositiveInt = Field(3, description="epochs without a better validation measure before stopping")
+    validation_seeds: SeedRange = Field(description="MiniGrid's reset seeds of the validation worlds, where the "
+                                        "plateau is measured (apart from the training and test worlds)")
+    validation_max_steps: PositiveInt = Field(100, description="a validation episode not done by then is a "
+                                              "failure, counted as this many steps")
+    target_return: float = Field(1.0, description="the pure DT's return-to-go at the start of an episode")
+    ppo: MiniGridPPOParams = Field(default_factory=lambda: MiniGridPPOParams(),
+                                   description="PPO's knobs (hnsdt.baselines.minigrid_ppo)")
+
+
 class MiniGridParams(Section):
     envs: dict[str, MiniGridEnvParams] = Field(min_length=1, description="MiniGrid's own worlds, one stage per "
                                                "name (minigrid_reference@<name>, outputs under minigrid/<name>)")
@@ -305,11 +344,22 @@ class MiniGridParams(Section):
                                   "and fail_prob, each with its own failure draws")
     collect: MiniGridCollectParams | None = Field(None, description="the learners' datasets, one per world "
                                                   "(minigrid_collect@<name>, minigrid/<name>/dataset)")
+    learn: MiniGridLearnParams | None = Field(None, description="the decision transformers trained on those "
+                                              "datasets and evaluated beside the references "
+                                              "(minigrid_learn@<name>, minigrid/<name>/learned)")
 
     @model_validator(mode="after")
     def _apart(self):
-        if self.collect is not None and set(self.collect.train_seeds.seeds) & set(self.test_seeds.seeds):
+        test = set(self.test_seeds.seeds)
+        train = set(self.collect.train_seeds.seeds) if self.collect is not None else set()
+        if train & test:
             raise ValueError("collect.train_seeds overlaps test_seeds: a world trained on would be evaluated")
+        if self.learn is not None:
+            if self.collect is None:
+                raise ValueError("learn needs collect: the decision transformers train on its datasets")
+            if set(self.learn.validation_seeds.seeds) & (train | test):
+                raise ValueError("learn.validation_seeds overlaps collect.train_seeds or test_seeds: the plateau "
+                                 "must be measured on worlds of its own")
         return self
 
     @field_validator("envs")

@@ -64,6 +64,8 @@ OFFLINE_BASELINES = tuple(m.name for m in METHODS.values() if m.stage == "train_
 ONLINE_BASELINES = tuple(m.name for m in METHODS.values() if m.stage == "train_online")  # `baselines.online`
 BASELINES = OFFLINE_BASELINES + ONLINE_BASELINES  # configured under `baselines.<name>`
 LEARNED = DT_METHODS + BASELINES
+OUR_DTS = tuple(m.name for m in METHODS.values() if m.stage == "train" and m.arm == "ours")
+MINIGRID_LEARNERS = OUR_DTS + tuple(m for m in ONLINE_BASELINES if METHODS[m].code == "policy_gradient")  # PPO
 STAGES = {"train": DT_METHODS, "train_offline": OFFLINE_BASELINES, "train_online": ONLINE_BASELINES}
 
 

@@ -27,8 +27,9 @@ class DatasetError(RuntimeError):
     """A dataset that is missing, incomplete or not one of ours; the message says which file and why."""
 
 
-def check_dataset(root: str | Path) -> dict:
-    """Validate the files of one of our datasets and return its ``meta/hnsdt.json``; raise DatasetError."""
+def check_dataset(root: str | Path, required: dict[str, str] = REQUIRED_DTYPES) -> dict:
+    """Validate the files of one of our datasets and return its ``meta/hnsdt.json``; raise DatasetError.
+    ``required``: the features it must have, with their dtypes (a MiniGrid dataset's differ)."""
     root = Path(root)
     if not root.is_dir():
         raise DatasetError(f"dataset {root}: no such folder (run `dvc repro collect` or `hnsdt collect`)")
@@ -43,10 +44,10 @@ def check_dataset(root: str | Path) -> dict:
     if info.get("codebase_version") != "v3.0":
         raise DatasetError(f"dataset {root}: LeRobot format {info.get('codebase_version')}, expected v3.0")
     features = info.get("features", {})
-    missing = set(REQUIRED_DTYPES) - set(features)
+    missing = set(required) - set(features)
     if missing:
         raise DatasetError(f"dataset {root}: features {sorted(missing)} are missing from meta/info.json")
-    for name, dtype in REQUIRED_DTYPES.items():
+    for name, dtype in required.items():
         if features[name].get("dtype") != dtype:
             raise DatasetError(f"dataset {root}: feature {name!r} has dtype {features[name].get('dtype')}, "
                                f"expected {dtype} (meta/info.json)")

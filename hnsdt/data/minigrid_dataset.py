@@ -29,6 +29,7 @@ and ``README.md`` is the card. Stock ``LeRobotDataset(repo_id, root=...)`` loads
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -37,9 +38,11 @@ from tqdm import tqdm
 
 from hnsdt.core.fileio import atomic_dir
 from hnsdt.data.card import data_md5
-from hnsdt.data.format import EPISODES_TABLE, HNSDT_META
+from hnsdt.data.format import EPISODES_TABLE, HNSDT_META, DatasetError, check_dataset, frame_columns
 from hnsdt.data.lerobot_io import LeRobotDataset, _skip_fingerprints, _skip_image_embedding
 from hnsdt.minigrid.collect import STATE_NAMES, SUBGOAL_NAMES
+from hnsdt.models.minigrid_nets import step_states
+from hnsdt.models.windows import Frames, frames_from_arrays
 
 VIEW_NAMES = tuple(f"x{i}y{j}{part}" for i in range(7) for j in range(7) for part in ("obj", "color", "state"))
 FEATURES = {
@@ -115,3 +118,21 @@ def write_minigrid_dataset(root: str | Path, repo_id: str, episodes: list[dict],
         (staging / HNSDT_META).write_text(json.dumps(full, indent=2, sort_keys=True) + "\n")
         (staging / "README.md").write_text(_card(repo_id, meta, rows, md5))
     return root
+
+
+def load_minigrid_frames(root: str | Path, with_md5: bool = False) -> Frames | tuple[Frames, str]:
+    """The dataset's frames as the MiniGrid decision transformer reads them (:mod:`hnsdt.models.minigrid_nets`):
+    states ``observation.state`` and ``observation.view`` side by side, each frame's sub-goal ``(row, col, type,
+    colour)`` (its target cell and its object) as the target; ``with_md5``: and the data files' md5 they were read
+    from (checked against the one the dataset recorded)."""
+    meta = check_dataset(root, {name: f["dtype"] for name, f in FEATURES.items()})
+    if "subgoal_kinds" not in meta or meta.get("subgoal_kinds") != list(SUBGOAL_NAMES):
+        raise DatasetError(f"dataset {root}: not a MiniGrid dataset of this version (meta/hnsdt.json has no "
+                           f"subgoal_kinds {list(SUBGOAL_NAMES)}); run `dvc repro minigrid_collect`")
+    cols = frame_columns(root, ["observation.state", "observation.view", "action", "next.reward", "subgoal",
+                                "subgoal.target", "subgoal.object", "episode_index", "frame_index"])
+    frames = frames_from_arrays(step_states(cols["observation.state"], cols["observation.view"]), cols["action"],
+                                cols["next.reward"], cols["subgoal"], cols["subgoal.target"], cols["episode_index"],
+                                cols["frame_index"])
+    frames = replace(frames, targets=np.concatenate([frames.targets, cols["subgoal.object"]], axis=1))
+    return (frames, meta.get("data_md5", "")) if with_md5 else frames

@@ -44,20 +44,52 @@ def reference_rows(env_id: str, seeds: Iterable[int], fail_probs: Iterable[float
                              reward=opt.ret, steps=opt.steps, plans=0.0, gave_up=0, states=len(mdp)))
             for method, play in POLICIES.items():
                 eps = [play(env_id, seed, p, failure_seed=k) for k in range(episodes)]
-                won = [e.steps for e in eps if e.success]
-                rows.append(dict(env=env_id, seed=seed, fail_prob=p, method=method, episodes=len(eps),
-                                 success=float(np.mean([e.success for e in eps])),
-                                 reward=float(np.mean([e.reward for e in eps])),
-                                 steps=float(np.mean(won)) if won else float("nan"),
-                                 plans=float(np.mean([e.plans for e in eps])),
-                                 gave_up=sum(bool(e.error) for e in eps), states=len(mdp)))
+                rows.append(_row(env_id, seed, p, method, eps, len(mdp)))
     return rows
+
+
+class StepsOnWorlds:
+    """A validation measure for a MiniGrid decision transformer (lower is better): the mean steps of its episodes
+    on ``jobs`` (validation worlds × fail_probs), an episode not done within ``max_steps`` counting as
+    ``max_steps`` — which is then the ``ceiling``, the value of a model that never reaches its goal
+    (:class:`hnsdt.models.fit.Validation`). Plays greedily from fixed worlds and failure streams: it draws no
+    random numbers of the training's."""
+
+    name = "steps"
+
+    def __init__(self, env_id: str, jobs: list, max_steps: int, target_return: float = 1.0):
+        self.env_id, self.jobs, self.max_steps, self.target_return = env_id, jobs, max_steps, target_return
+        self.ceiling = float(max_steps)
+
+    def __call__(self, model) -> float:
+        from hnsdt.agents.minigrid_play import play
+
+        episodes = play(model, self.env_id, self.jobs, self.target_return, self.max_steps)
+        return float(np.mean([e.steps if e.success else self.max_steps for e in episodes]))
+
+
+def played_rows(env_id: str, method: str, train_seed: int, jobs: list, episodes: list) -> list[dict]:
+    """A learner's rows, one per (world, fail_prob) as the references' (means of its episodes there), with the
+    training seed that made it."""
+    groups: dict[tuple, list] = {}
+    for job, ep in zip(jobs, episodes):
+        groups.setdefault((job.seed, job.fail_prob), []).append(ep)
+    return [_row(env_id, seed, p, method, eps, 0) | {"train_seed": int(train_seed)}
+            for (seed, p), eps in groups.items()]
+
+
+def _row(env_id: str, seed: int, p: float, method: str, eps: list, states: int) -> dict:
+    """The row of ``eps``, the episodes of ``method`` on one world and fail_prob."""
+    won = [e.steps for e in eps if e.success]
+    return dict(env=env_id, seed=int(seed), fail_prob=float(p), method=method, episodes=len(eps),
+                success=float(np.mean([e.success for e in eps])), reward=float(np.mean([e.reward for e in eps])),
+                steps=float(np.mean(won)) if won else float("nan"), plans=float(np.mean([e.plans for e in eps])),
+                gave_up=sum(bool(e.error) for e in eps), states=states)
 
 
 def recordings(env_id: str, seed: int, fail_probs: Iterable[float], meta: dict | None = None) -> dict[str, bytes]:
     """One recorded episode (failure stream 0) of each played reference on world ``seed`` per fail_prob, as
     ``{file name: bytes}``: ``<method>_fp<p>.rrd`` and ``.mcap``."""
-    from hnsdt.logs.minigrid_log import MiniGridRecord, recording_files
     from hnsdt.minigrid.bot import BotPolicy
     from hnsdt.minigrid.controllers import SymbolicAgent
     from hnsdt.minigrid.live import run_episode
@@ -68,11 +100,33 @@ def recordings(env_id: str, seed: int, fail_probs: Iterable[float], meta: dict |
         for method, make in policies.items():
             trace: list = []
             ep = run_episode(env_id, seed, p, 0, make, trace)
-            rec = MiniGridRecord(f"{method}/{env_id}@{seed}/fp{p:g}/ep0", trace, ep.success,
-                                 dict(meta or {}, method=method, env=env_id, world_seed=int(seed), fail_prob=float(p)))
-            for suffix, data in recording_files(rec).items():
-                files[f"{method}_fp{p:g}{suffix}"] = data
+            files |= _recorded(method, env_id, seed, p, trace, ep.success, meta)
     return files
+
+
+def learned_recordings(env_id: str, models: dict, seed: int, fail_probs: Iterable[float], target_return: float,
+                       meta: dict | None = None) -> dict[str, bytes]:
+    """One recorded episode (failure stream 0) of each learner in ``models`` (method -> model) on world ``seed`` per
+    fail_prob: ``<method>_fp<p>.rrd`` and ``.mcap``, as :func:`recordings`."""
+    from hnsdt.agents.minigrid_play import Job, play
+
+    files = {}
+    for p in fail_probs:
+        for method, model in models.items():
+            trace: list = []
+            ep, = play(model, env_id, [Job(seed, p, 0)], target_return, traces={0: trace})
+            files |= _recorded(method, env_id, seed, p, trace, ep.success, meta)
+    return files
+
+
+def _recorded(method: str, env_id: str, seed: int, p: float, trace: list, success: bool, meta: dict | None
+              ) -> dict[str, bytes]:
+    """The ``.rrd`` and ``.mcap`` of one traced episode, by file name."""
+    from hnsdt.logs.minigrid_log import MiniGridRecord, recording_files
+
+    rec = MiniGridRecord(f"{method}/{env_id}@{seed}/fp{p:g}/ep0", trace, success,
+                         dict(meta or {}, method=method, env=env_id, world_seed=int(seed), fail_prob=float(p)))
+    return {f"{method}_fp{p:g}{suffix}": data for suffix, data in recording_files(rec).items()}
 
 
 def summarise(rows: list[dict]) -> list[dict]:
@@ -89,6 +143,30 @@ def summarise(rows: list[dict]) -> list[dict]:
                         steps_mean=float(np.mean(steps)) if steps else float("nan"),
                         plans_mean=float(np.mean([r["plans"] for r in rs])),
                         gave_up=sum(r["gave_up"] for r in rs)))
+    return out
+
+
+LEARNED_COLUMNS = ("env", "fail_prob", "method", "seeds", "worlds", "success_mean", "success_std", "reward_mean",
+                   "reward_std", "steps_mean", "steps_std", "gave_up")
+
+
+def summarise_seeds(rows: list[dict]) -> list[dict]:
+    """Per (env, fail_prob, method) of a learner's rows: the mean over its training seeds of each seed's mean over
+    the worlds (:func:`summarise`), and the std over the seeds."""
+    per_seed: dict[tuple, list[dict]] = {}
+    for seed in sorted({r["train_seed"] for r in rows}):
+        for s in summarise([r for r in rows if r["train_seed"] == seed]):
+            per_seed.setdefault((s["env"], s["fail_prob"], s["method"]), []).append(s)
+    out = []
+    for (env, p, method), ss in per_seed.items():
+        stats = {}
+        for key in ("success", "reward", "steps"):
+            values = np.array([s[f"{key}_mean"] for s in ss], dtype=float)
+            values = values[~np.isnan(values)]
+            stats[f"{key}_mean"] = float(values.mean()) if len(values) else float("nan")
+            stats[f"{key}_std"] = float(values.std()) if len(values) else float("nan")
+        out.append(dict(env=env, fail_prob=p, method=method, seeds=len(ss), worlds=ss[0]["worlds"], **stats,
+                        gave_up=sum(s["gave_up"] for s in ss)))
     return out
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from hnsdt.minigrid.controllers import SymbolicAgent
 from hnsdt.minigrid.live import GaveUp, make_env, read_world, snapshot
 from hnsdt.minigrid.operators import DROP, GOTO_GOAL, GOTO_DOOR, KINDS, OPEN_IT, Operator
-from hnsdt.minigrid.world import Actions, World
+from hnsdt.minigrid.world import Actions, World, WorldState
 
 RANDOM_ACTIONS = (Actions.left, Actions.right, Actions.forward, Actions.pickup, Actions.drop, Actions.toggle)
 SUBGOAL_NAMES = ("none", *KINDS)  # a frame's sub-goal kind: its index here (0 = none)
@@ -45,6 +45,19 @@ def subgoal_object(world: World, op: Operator | None) -> tuple[int, int]:
     return _indices(thing.kind, thing.color)
 
 
+def state_vector(world: World, s: WorldState) -> list[int]:
+    """A frame's ``observation.state`` (:data:`STATE_NAMES`): the agent's cell and direction, what it carries."""
+    carried = world.objects[s.carrying] if s.carrying >= 0 else None
+    return [*s.cell, s.direction, *(_indices(carried.kind, carried.color) if carried else (0, 0))]
+
+
+def subgoal_of(world: World, op: Operator | None) -> tuple[int, list[int]]:
+    """A frame's sub-goal: its kind's index in :data:`SUBGOAL_NAMES` and ``(row, col, type, colour)``, its target
+    cell (-1, -1: none) and its object (:func:`subgoal_object`)."""
+    return (SUBGOAL_NAMES.index(op.kind) if op else 0,
+            [*(op.cell if op else (-1, -1)), *subgoal_object(world, op)])
+
+
 def noisy_episode(env_id: str, seed: int, fail_prob: float, failure_seed: int, epsilon: float,
                   rng: np.random.Generator) -> dict:
     """One labelled episode of the noisy symbolic agent on ``env_id``'s world ``seed``."""
@@ -64,14 +77,13 @@ def noisy_episode(env_id: str, seed: int, fail_prob: float, failure_seed: int, e
                 break
             op = agent.plan[0] if agent.plan else None
             action = int(rng.choice(RANDOM_ACTIONS)) if rng.random() < epsilon else planned
-            carried = world.objects[s.carrying] if s.carrying >= 0 else None
+            kind, target = subgoal_of(world, op)
             ep["views"].append(np.asarray(obs["image"], np.int64).reshape(-1))
-            ep["states"].append([*s.cell, s.direction, *(_indices(carried.kind, carried.color) if carried
-                                                         else (0, 0))])
+            ep["states"].append(state_vector(world, s))
             ep["actions"].append(action)
-            ep["subgoals"].append(SUBGOAL_NAMES.index(op.kind) if op else 0)
-            ep["targets"].append(list(op.cell) if op else [-1, -1])
-            ep["objects"].append(list(subgoal_object(world, op)))
+            ep["subgoals"].append(kind)
+            ep["targets"].append(target[:2])
+            ep["objects"].append(target[2:])
             ep["names"].append(op.name(world) if op else "none")
             obs, reward, terminated, truncated, _ = env.step(action)
             ep["rewards"].append(float(reward))

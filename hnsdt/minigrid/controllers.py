@@ -105,19 +105,24 @@ class SymbolicAgent:
         self.plan: list[Operator] = []
         self.plans = 0
 
-    def act(self, s: WorldState) -> int:
-        ps = PlanState.of(s)
+    def advance(self, ps: PlanState) -> bool:
+        """Drop the operators ``ps`` has achieved from the plan's head; can the next one still be done?"""
         while self.plan and achieved(self.plan[0], ps):
             self.plan.pop(0)
-        action = None
-        if self.plan and possible(self.world, self.plan[0], ps):
-            action = controller(self.world, s, self.plan[0])
+        return bool(self.plan) and possible(self.world, self.plan[0], ps)
+
+    def replan(self, ps: PlanState) -> None:
+        try:
+            self.plan = plan(self.world, ps, self.mode)
+        except NoPlanError as exc:
+            raise GaveUp(str(exc)) from exc
+        self.plans += 1
+
+    def act(self, s: WorldState) -> int:
+        ps = PlanState.of(s)
+        action = controller(self.world, s, self.plan[0]) if self.advance(ps) else None
         if action is None:
-            try:
-                self.plan = plan(self.world, ps, self.mode)
-            except NoPlanError as exc:
-                raise GaveUp(str(exc)) from exc
-            self.plans += 1
+            self.replan(ps)
             action = controller(self.world, s, self.plan[0]) if self.plan else int(Actions.done)
             if action is None:
                 raise GaveUp(f"{self.world.name}: the controller of {self.plan[0].name(self.world)} cannot act")

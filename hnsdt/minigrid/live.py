@@ -201,29 +201,31 @@ def run_episode(env_id: str, seed: int, fail_prob: float, failure_seed: int,
             try:
                 action = policy.act(state)
             except GaveUp as exc:
-                _close(trace, env, world, state)
+                close_trace(trace, env, world, state)
                 return Episode(False, steps, 0.0, getattr(policy, "plans", 0), str(exc)[:200])
             frame = env.render() if trace is not None else None
             _, reward, terminated, truncated, info = env.step(action)
             steps += 1
             if trace is not None:
                 plan = getattr(policy, "plan", None)
-                trace.append(Step(frame, state.direction, _carried(world, state), plan[0].name(world) if plan else "",
+                trace.append(Step(frame, state.direction, carried_name(world, state), plan[0].name(world) if plan else "",
                                   int(action), float(reward), bool(info["move_failed"])))
             if terminated or truncated:
-                _close(trace, env, world, snapshot(world, env, live))
+                close_trace(trace, env, world, snapshot(world, env, live))
                 return Episode(bool(terminated and reward > 0), steps, float(reward), getattr(policy, "plans", 0))
     finally:
         env.close()
 
 
-def _carried(world: World, state: WorldState) -> str:
+def carried_name(world: World, state: WorldState) -> str:
+    """What the agent carries, "<colour> <kind>", or "" (a trace's and a recording's label)."""
     return world.objects[state.carrying].name if state.carrying >= 0 else ""
 
 
-def _close(trace: list[Step] | None, env, world: World, state: WorldState) -> None:
+def close_trace(trace: list[Step] | None, env, world: World, state: WorldState) -> None:
+    """End a trace (when there is one) with the final frame, a step without action."""
     if trace is not None:
-        trace.append(Step(env.render(), state.direction, _carried(world, state), "", -1, 0.0, False))
+        trace.append(Step(env.render(), state.direction, carried_name(world, state), "", -1, 0.0, False))
 
 
 def world_of(env_id: str, seed: int) -> World:

@@ -17,7 +17,7 @@ from safetensors.torch import load, save
 from hnsdt.core.fileio import atomic_dir, require_space
 from hnsdt.models.network import Network
 
-NETWORK_MODULES = ("dt", "qnetwork", "recurrent", "view")  # the modules of this package that define networks
+NETWORK_MODULES = ("dt", "minigrid_nets", "qnetwork", "recurrent", "view")  # the modules of this package that define networks
 
 
 

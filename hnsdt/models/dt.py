@@ -104,16 +104,17 @@ class DTConfig:
 
 
 class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig):
+    n_actions = N_ACTIONS  # the head's outputs; NO_ACTION (the "none" previous action) is this index. A network for
+    #                        a world with other actions (MiniGrid's 7: hnsdt.models.minigrid_nets) sets its own
+
     def __init__(self, cfg: DTConfig):
         super().__init__(cfg)
         d = cfg.d_model
         self.build_state_encoder(d)
-        self.action_emb = nn.Embedding(N_ACTIONS + (cfg.tokens == "step"), d)  # + NO_ACTION
+        self.action_emb = nn.Embedding(self.n_actions + (cfg.tokens == "step"), d)  # + NO_ACTION
         self.time_emb = nn.Embedding(cfg.max_timestep + 1, d)
         if cfg.condition == "subgoal":
-            self.subgoal_emb = nn.Embedding(VOCAB_SIZE, d)
-            self.target_row_emb = nn.Embedding(cfg.grid_h + 1, d)  # index 0 = no target
-            self.target_col_emb = nn.Embedding(cfg.grid_w + 1, d)
+            self.build_subgoal_encoder(d)
         elif cfg.condition == "return":
             self.return_proj = Linear(1, d)
         self.type_emb = nn.Embedding(3, d)  # state, action, condition: the model tells token kinds apart
@@ -122,7 +123,7 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
                                            batch_first=True, norm_first=True)
         self.blocks = nn.TransformerEncoder(layer, cfg.n_layers, enable_nested_tensor=False)
         self.norm = nn.LayerNorm(d)
-        self.head = Linear(d, N_ACTIONS)
+        self.head = Linear(d, self.n_actions)
         self.drop = nn.Dropout(cfg.dropout)
         self.register_buffer("causal_mask", nn.Transformer.generate_square_subsequent_mask(cfg.seq_len),
                              persistent=False)
@@ -135,6 +136,13 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         self.row_emb = nn.Embedding(cfg.grid_h, width)
         self.col_emb = nn.Embedding(cfg.grid_w, width)
         self.flag_proj = Linear(max(cfg.n_flags, 1), width, bias=False)
+
+    def build_subgoal_encoder(self, width: int) -> None:
+        """The sub-goal token's embeddings (:meth:`embed_subgoals`): the operator id and its target cell."""
+        cfg = self.cfg
+        self.subgoal_emb = nn.Embedding(VOCAB_SIZE, width)
+        self.target_row_emb = nn.Embedding(cfg.grid_h + 1, width)  # index 0 = no target
+        self.target_col_emb = nn.Embedding(cfg.grid_w + 1, width)
 
     def embed_states(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
         """(…, d_model) of states; ``targets`` (each step's absolute sub-goal target, -1: none) is there for a
@@ -170,7 +178,7 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
         subgoal_ids (B, T), subgoal_targets (B, T, 2), returns (B, T): each step's own. ``steps`` (B, T) bool,
         the real steps: the episodes are packed end to end into one sequence first, attention kept within
         each, so no padding is computed (the logits of pads are then 0)."""
-        prev = torch.full_like(actions, NO_ACTION)
+        prev = torch.full_like(actions, self.n_actions)  # (NO_ACTION)
         prev[:, 1:] = actions[:, :-1]
         inputs, segments = (states, prev, timesteps, subgoal_ids, subgoal_targets, returns), None
         if steps is not None:
@@ -223,8 +231,8 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
             g = self.embed_subgoals(subgoal_ids, self.subgoal_targets(states[:, -1], subgoal_targets))
             g = g + self.type_emb.weight[2]
         if cfg.tokens == "step":
-            prev = torch.full_like(actions, NO_ACTION)
-            prev[:, 1:] = torch.where(pad[:, :-1], NO_ACTION, actions[:, :-1])
+            prev = torch.full_like(actions, self.n_actions)  # (NO_ACTION)
+            prev[:, 1:] = torch.where(pad[:, :-1], self.n_actions, actions[:, :-1])
             x = self.embed_states(states) + self.action_emb(prev) + time + self.type_emb.weight[0]
             if cfg.condition == "return":
                 x = x + self.return_proj(returns[..., None] / cfg.return_scale)
@@ -252,7 +260,7 @@ class DecisionTransformer(Network, arch="decision_transformer", config=DTConfig)
     def loss(self, batch: dict) -> torch.Tensor:
         logits = self(batch["states"], batch["actions"], batch["timesteps"], batch.get("pad"), batch.get("subgoal_ids"),
                       batch.get("subgoal_targets"), batch.get("returns"), batch.get("steps"))
-        nll = F.cross_entropy(logits.reshape(-1, N_ACTIONS), batch["actions"].reshape(-1), reduction="none")
+        nll = F.cross_entropy(logits.reshape(-1, self.n_actions), batch["actions"].reshape(-1), reduction="none")
         mask = batch["loss_mask"].reshape(-1).float()
         return (nll * mask).sum() / mask.sum().clamp(min=1.0)
 

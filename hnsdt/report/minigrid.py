@@ -1,11 +1,13 @@
 """The section on MiniGrid's own worlds: per world and fail_prob, the exact optimum beside MiniGrid's BabyAI bot and
-the symbolic agent (planner + hand-written controllers)."""
+the symbolic agent (planner + hand-written controllers), and the decision transformers trained on each world's
+dataset (HNSDT: the same planner, the transformer in place of the controllers; the pure DT)."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 from hnsdt.compose.params import Params
+from hnsdt.core.methods import METHODS
 from hnsdt.evaluation.minigrid import BOT, OPTIMUM, SYMBOLIC, read_csv
 
 
@@ -15,14 +17,12 @@ def minigrid_context(params: Params, folder: Path) -> dict:
     section = params.minigrid
     if section is None or not section.envs:
         return {}
-    lines, worlds = [], []
+    lines, worlds, learned, budgets = [], [], [], []
     for name, env in section.envs.items():
-        path = folder / name / "reference" / "summary.csv"
-        if not path.is_file():
-            raise FileNotFoundError(f"{path}: no references of MiniGrid world {name} "
-                                    f"(run `dvc repro minigrid_reference@{name}`)")
-        rows = {(r["fail_prob"], r["method"]): r for r in read_csv(path.read_text())}
+        rows = {(r["fail_prob"], r["method"]): r for r in _summary(folder / name / "reference", name, "reference")}
         worlds.append(f"{env.id} (`{name}`, {rows[next(iter(rows))]['worlds']} worlds)")
+        ours = ({(r["fail_prob"], r["method"]): r for r in _summary(folder / name / "learned", name, "learn")}
+                if section.learn is not None else {})
         for p in sorted({p for p, _ in rows}):
             opt = rows[(p, OPTIMUM)]
             played = [rows[(p, m)] for m in (SYMBOLIC, BOT)]
@@ -31,5 +31,49 @@ def minigrid_context(params: Params, folder: Path) -> dict:
                          + " | ".join(f"{r['success_mean']:.3f} | {r['steps_mean']:.1f} "
                                       f"({r['steps_mean'] / opt['steps_mean']:.2f}×) | {r['reward_mean']:.3f}"
                                       for r in played) + " |")
+            for method in section.learn.methods if ours else ():
+                r = ours[(p, method)]
+                steps = (f"{r['steps_mean']:.1f} ± {r['steps_std']:.1f} ({r['steps_mean'] / opt['steps_mean']:.2f}×)"
+                         if r["success_mean"] > 0 else "–")
+                learned.append(f"| {env.id} | {p:g} | {METHODS[method].label} | {r['success_mean']:.3f} ± "
+                               f"{r['success_std']:.3f} | {steps} | {r['reward_mean']:.3f} | "
+                               f"{opt['success_mean']:.3f} | {opt['steps_mean']:.1f} |")
+        if ours:
+            budgets += _budgets(env.id, folder / name / "learned", section.learn.methods)
+    learn = section.learn
     return dict(minigrid_lines=lines, minigrid_worlds=worlds, minigrid_seeds=section.test_seeds.seeds,
-                minigrid_episodes=section.episodes)
+                minigrid_episodes=section.episodes, minigrid_learned=learned, minigrid_budgets=budgets,
+                minigrid_learn=None if learn is None else dict(
+                    seeds=len(learn.seeds), validation=learn.validation_seeds.count,
+                    train=section.collect.train_seeds.count, max_epochs=learn.max_epochs, patience=learn.patience,
+                    ppo_every=f"{learn.ppo.eval_every:,}", ppo_patience=learn.ppo.patience,
+                    ppo_frames=f"{learn.ppo.max_frames:,}"))
+
+
+def _budgets(env_id: str, folder: Path, methods: list[str]) -> list[str]:
+    """Per method: what its seeds trained on and where they stopped (``curves/<method>-seed<k>.json``' usage)."""
+    import json
+
+    lines = []
+    for method in methods:
+        used = [json.loads(p.read_text())["usage"] for p in sorted((folder / "curves").glob(f"{method}-seed*.json"))]
+        best = [min(v["value"] for v in u["validation_steps"]) for u in used]
+        if "frames" in used[0]:  # (online: env steps)
+            data = f"{min(u['frames'] for u in used):,}–{max(u['frames'] for u in used):,} env steps"
+            stop = (f"{sum(u['stopped_early'] for u in used)} of {len(used)} at their plateau (best measurement at "
+                    f"{min(u['best_step'] for u in used):,}–{max(u['best_step'] for u in used):,} steps)")
+        else:
+            data = f"{used[0]['dataset_frames']:,} dataset frames"
+            stop = (f"{sum(u['stopped_early'] for u in used)} of {len(used)} at their plateau, after "
+                    f"{min(u['epochs'] for u in used):g}–{max(u['epochs'] for u in used):g} epochs (best "
+                    f"{min(u['best_epoch'] for u in used)}–{max(u['best_epoch'] for u in used)})")
+        lines.append(f"| {env_id} | {METHODS[method].label} | {data} | {stop} | "
+                     f"{min(best):.1f}–{max(best):.1f} |")
+    return lines
+
+
+def _summary(folder: Path, name: str, stage: str) -> list[dict]:
+    path = folder / "summary.csv"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: missing (run `dvc repro minigrid_{stage}@{name}`)")
+    return read_csv(path.read_text())

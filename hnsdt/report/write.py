@@ -62,7 +62,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
         curves, curve_figures = learning_curves(outs, Path(lock_path).parent, tmp / "figures")
         inputs = {p: md5 for p, md5 in sorted(outs.items())  # (not the recordings: their bytes vary run to run)
                   if p.startswith(("data/", "models/", "generalisation/dataset", "generalisation/models/",
-                                   "minigrid/")) and not p.endswith("/recordings")}
+                                   "minigrid/")) and not p.endswith("recordings")}
         unseen = {}
         if generalisation is not None:
             if not (generalisation / "summary.csv").is_file():

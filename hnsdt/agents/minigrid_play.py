@@ -1,0 +1,144 @@
+"""The decision transformers acting in MiniGrid's own worlds (:mod:`hnsdt.models.minigrid_nets`): HNSDT under the
+symbolic planner, and the pure DT.
+
+HNSDT: at every step the planner's operator at the head of its plan (the symbolic agent's plan-keeping,
+:class:`hnsdt.minigrid.controllers.SymbolicAgent`: drop what the state has achieved, replan from the true state
+when the next operator can no longer be done) becomes the step's sub-goal token, and the transformer picks the
+action — the hand-written controllers never act. The pure DT reads a return-to-go instead (the target return,
+less what the episode has earned). The actor-critic reads the current step alone. All act greedily (the most
+likely action).
+
+Many episodes are played in lockstep (one row each of the transformer's key/value cache), so that each step is one
+forward pass for all of them; each episode ends when MiniGrid ends it (success, or its own step limit) or at
+``max_steps`` when given (counted a failure).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from hnsdt.minigrid.collect import state_vector, subgoal_of
+from hnsdt.minigrid.controllers import SymbolicAgent
+from hnsdt.minigrid.live import Episode, GaveUp, Step, carried_name, close_trace, make_env, read_world, snapshot
+from hnsdt.minigrid.operators import PlanState
+from hnsdt.models.minigrid_nets import MiniGridActorCritic, MiniGridDT, step_states
+
+
+@dataclass(frozen=True)
+class Job:
+    """One episode to play: MiniGrid's world ``seed`` under ``fail_prob``, failure stream ``failure_seed``."""
+
+    seed: int
+    fail_prob: float
+    failure_seed: int = 0
+
+
+class _Game:
+    """One episode in play: its env, world, what the learner saw last and (HNSDT) its planner."""
+
+    def __init__(self, env_id: str, job: Job, subgoals: bool, traced: bool):
+        self.env = make_env(env_id, job.fail_prob, **({"render_mode": "rgb_array", "tile_size": 16} if traced
+                                                      else {}))
+        self.obs, _ = self.env.reset(seed=int(job.seed), options={"failure_seed": int(job.failure_seed)})
+        self.world, self.live = read_world(self.env, env_id, job.seed)
+        self.planner = SymbolicAgent(self.world) if subgoals else None
+        self.steps, self.earned = 0, 0.0
+
+    def state(self):
+        return snapshot(self.world, self.env, self.live)
+
+    def operator(self, s):
+        """HNSDT's sub-goal now: the plan's head, replanned when it can no longer be done (GaveUp: no plan)."""
+        ps = PlanState.of(s)
+        if not self.planner.advance(ps):
+            self.planner.replan(ps)
+        return self.planner.plan[0] if self.planner.plan else None
+
+
+class _Transformer:
+    """A decision transformer's acting: its key/value cache, each episode's previous action and return-to-go."""
+
+    def __init__(self, model: MiniGridDT, n: int, target_return: float):
+        self.model, self.target_return = model, target_return
+        self.cache = model.start(n)
+        self.prev = np.full(n, model.n_actions, np.int64)  # (NO_ACTION before the first step)
+
+    def actions(self, rows: list[int], states, kinds, targets, games) -> np.ndarray:
+        t = lambda x, **kw: torch.as_tensor(x, device=self.cache.seen.device, **kw)  # noqa: E731
+        subgoals = self.model.cfg.condition == "subgoal"
+        returns = t([self.target_return - games[i].earned for i in rows], dtype=torch.float32)
+        logits = self.model.step(self.cache, t(rows), t(states), t(self.prev[rows]), t([games[i].steps for i in rows]),
+                                 t(kinds) if subgoals else None, t(targets) if subgoals else None,
+                                 None if subgoals else returns)
+        actions = logits.argmax(-1).cpu().numpy()
+        self.prev[rows] = actions
+        return actions
+
+
+class _ActorCritic:
+    """The actor-critic's acting: the most likely action of the current step."""
+
+    def __init__(self, model: MiniGridActorCritic):
+        self.model = model
+
+    def actions(self, rows, states, kinds, targets, games) -> np.ndarray:
+        with torch.no_grad():
+            logits, _ = self.model(torch.as_tensor(states, device=next(self.model.parameters()).device))
+        return logits.argmax(-1).cpu().numpy()
+
+
+def play(model: MiniGridDT | MiniGridActorCritic, env_id: str, jobs: list[Job], target_return: float = 1.0,
+         max_steps: int = 0, traces: dict[int, list[Step]] | None = None) -> list[Episode]:
+    """Play every job with ``model`` (eval mode); the episodes in job order. ``traces``: job index -> a list that
+    gets each step's :class:`Step` (MiniGrid's drawing of the world before it) and a closing frame."""
+    traces = traces or {}
+    subgoals = getattr(model.cfg, "condition", "") == "subgoal"
+    games = [_Game(env_id, job, subgoals, i in traces) for i, job in enumerate(jobs)]
+    done: list[Episode | None] = [None] * len(games)
+    actor = (_Transformer(model, len(games), target_return) if isinstance(model, MiniGridDT)
+             else _ActorCritic(model))
+    alive = list(range(len(games)))
+    try:
+        while alive:
+            rows, states, kinds, targets, ops = [], [], [], [], []
+            for i in alive:
+                g = games[i]
+                s = g.state()
+                try:
+                    op = g.operator(s) if subgoals else None
+                except GaveUp as exc:
+                    done[i] = Episode(False, g.steps, 0.0, g.planner.plans, str(exc)[:200])
+                    close_trace(traces.get(i), g.env, g.world, s)
+                    continue
+                kind, target = subgoal_of(g.world, op)
+                rows.append(i)
+                states.append(step_states(state_vector(g.world, s), g.obs["image"]))
+                kinds.append(kind)
+                targets.append(target)
+                ops.append(op.name(g.world) if op else "")
+            if not rows:
+                break
+            actions = actor.actions(rows, np.stack(states), kinds, targets, games)
+            for i, a, op in zip(rows, actions, ops):
+                g = games[i]
+                frame = g.env.render() if i in traces else None
+                s = g.state() if i in traces else None
+                g.obs, reward, terminated, truncated, info = g.env.step(int(a))
+                g.steps += 1
+                g.earned += float(reward)
+                if i in traces:
+                    traces[i].append(Step(frame, s.direction, carried_name(g.world, s), op, int(a), float(reward),
+                                          bool(info["move_failed"])))
+                if terminated or truncated or (max_steps and g.steps >= max_steps):
+                    done[i] = Episode(bool(terminated and reward > 0), g.steps, float(reward),
+                                      g.planner.plans if g.planner else 0)
+                    close_trace(traces.get(i), g.env, g.world, g.state())
+            alive = [i for i in alive if done[i] is None]
+    finally:
+        for g in games:
+            g.env.close()
+    return done
+

@@ -1,0 +1,97 @@
+"""The decision transformers on MiniGrid's own worlds, one run per method and training seed: train on the world's
+dataset (:mod:`hnsdt.data.minigrid_dataset`) to the plateau of the steps on validation worlds, then play every
+test world and fail_prob (:func:`hnsdt.agents.minigrid_play.play`).
+
+A run is a frozen :class:`LearnRun` (the dataset by path and md5, the knobs, the worlds) handed to :func:`learn` on
+the stage's executor (:mod:`hnsdt.core.compute`); it returns the weights, the curve, what the training used and
+the played episodes, and touches no file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from functools import lru_cache
+
+from hnsdt.agents.minigrid_play import Job, play
+from hnsdt.baselines.minigrid_ppo import MiniGridPPOConfig, train_minigrid_ppo
+from hnsdt.compose.params import Params
+from hnsdt.core.methods import OUR_DTS, method
+from hnsdt.data.format import DatasetError
+from hnsdt.data.minigrid_dataset import load_minigrid_frames
+from hnsdt.evaluation.minigrid import StepsOnWorlds
+from hnsdt.models.minigrid_nets import MiniGridActorCriticConfig, MiniGridDT, MiniGridDTConfig
+from hnsdt.models.train import TrainConfig, train_decision_transformer
+
+
+@dataclass(frozen=True)
+class LearnRun:
+    env_id: str
+    dataset: str  # the world's LeRobot dataset
+    data_md5: str  # ... whose bytes the run was planned on
+    method: str  # hnsdt, pure_dt or ppo
+    seed: int
+    model: tuple  # the network's config fields (MiniGridDTConfig's, MiniGridActorCriticConfig's) as (name, value)
+    train: tuple  # the trainer's (TrainConfig's, MiniGridPPOConfig's)
+    validation: tuple[Job, ...]
+    validation_max_steps: int
+    test: tuple[Job, ...]
+    target_return: float
+    train_seeds: tuple[int, ...]  # PPO's worlds (the dataset's)
+    fail_probs: tuple[float, ...]
+
+
+def learn_runs(params: Params, env: str, dataset: str) -> list[LearnRun]:
+    """Every method × seed of ``minigrid.learn`` on world ``env`` (a key of ``minigrid.envs``)."""
+    from hnsdt.data.format import check_dataset
+    from hnsdt.data.minigrid_dataset import FEATURES
+
+    section = params.need("minigrid")
+    learn = section.learn
+    if learn is None:
+        raise params.error("minigrid.learn is missing: the decision transformers' knobs on MiniGrid's worlds")
+    md5 = check_dataset(dataset, {name: f["dtype"] for name, f in FEATURES.items()}).get("data_md5", "")
+    validation = tuple(Job(s, p, 0) for s in learn.validation_seeds.seeds for p in section.fail_probs)
+    test = tuple(Job(s, p, k) for s in section.test_seeds.seeds for p in section.fail_probs
+                 for k in range(section.episodes))
+    runs = []
+    for name in learn.methods:
+        if name in OUR_DTS:
+            model = MiniGridDTConfig(condition=method(name).condition, **learn.model.model_dump())
+            train = TrainConfig(epochs=learn.max_epochs, batch_size=learn.batch_size, lr=learn.lr, seed=0,
+                                device="cpu", patience=learn.patience, log_every=10)
+        else:
+            model, train = MiniGridActorCriticConfig(), MiniGridPPOConfig(**learn.ppo.model_dump())
+        for seed in learn.seeds:
+            runs.append(LearnRun(section.envs[env].id, str(dataset), md5, name, int(seed),
+                                 tuple(asdict(model).items()), tuple({**asdict(train), "seed": int(seed)}.items()),
+                                 validation, learn.validation_max_steps, test, learn.target_return,
+                                 tuple(section.collect.train_seeds.seeds), tuple(section.fail_probs)))
+    return runs
+
+
+@lru_cache(maxsize=1)
+def _frames(dataset: str, md5: str):
+    """The dataset's frames, read once per process; refused when its bytes are not those the stage planned on."""
+    frames, found = load_minigrid_frames(dataset, with_md5=True)
+    if found != md5:
+        raise DatasetError(f"dataset {dataset}: changed since the stage read it (data md5 {found}, was {md5}); "
+                           "run the stage again")
+    return frames
+
+
+def learn(run: LearnRun) -> dict:
+    """Train ``run``'s model to its plateau on the validation worlds, then play the test worlds: ``{"state":
+    weights, "config", "curve", "usage", "episodes": [Episode per test job]}``."""
+    measure = StepsOnWorlds(run.env_id, list(run.validation), run.validation_max_steps, run.target_return)
+    if run.method in OUR_DTS:
+        cfg = MiniGridDTConfig(**dict(run.model))
+        model, curve, usage = train_decision_transformer(_frames(run.dataset, run.data_md5), cfg,
+                                                         TrainConfig(**dict(run.train)), progress=False,
+                                                         network=MiniGridDT, measure=measure)
+    else:
+        cfg = MiniGridActorCriticConfig(**dict(run.model))
+        model, curve, usage = train_minigrid_ppo(run.env_id, list(run.train_seeds), list(run.fail_probs), cfg,
+                                                 MiniGridPPOConfig(**dict(run.train)), measure, progress=False)
+    episodes = play(model, run.env_id, list(run.test), run.target_return)
+    return {"network": type(model), "state": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
+            "config": cfg, "curve": curve, "usage": usage, "episodes": episodes}
