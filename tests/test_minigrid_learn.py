@@ -49,6 +49,19 @@ def test_the_target_offset_is_where_minigrid_shows_the_object_in_its_own_view(se
     assert egocentric(torch.tensor([-1, -1]), torch.tensor([2, 2]), torch.tensor(0), 15).tolist() == [-1, -1]
 
 
+def test_the_networks_know_minigrids_own_ranges():
+    """The networks' index ranges are MiniGrid's (they are written out so that loading any checkpoint does not
+    import the MiniGrid world layer)."""
+    from minigrid.core.constants import COLOR_TO_IDX, DIR_TO_VEC, OBJECT_TO_IDX, STATE_TO_IDX
+
+    from hnsdt.minigrid.collect import SUBGOAL_NAMES
+    from hnsdt.minigrid.world import Actions
+    from hnsdt.models import minigrid_nets as nets
+
+    assert (nets.N_ACTIONS, nets.N_OBJECTS, nets.N_COLORS, nets.N_DOOR_STATES, nets.N_DIRECTIONS, nets.N_KINDS) == (
+        len(Actions), len(OBJECT_TO_IDX), len(COLOR_TO_IDX), len(STATE_TO_IDX), len(DIR_TO_VEC), len(SUBGOAL_NAMES))
+
+
 def test_acting_step_by_step_gives_the_whole_episode_pass_numbers():
     """The key/value cache (one step a call, as play acts) and the packed whole-episode pass of training give the
     same logits, for HNSDT's per-step sub-goals and the pure DT's returns."""

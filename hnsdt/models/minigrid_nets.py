@@ -24,11 +24,12 @@ import numpy as np
 import torch
 import torch.nn as nn
 
-from hnsdt.minigrid.world import N_ACTIONS
 from hnsdt.models.dt import DecisionTransformer, DTConfig
 from hnsdt.models.kernels import Linear
 from hnsdt.models.network import Network
 
+N_ACTIONS = 7  # MiniGrid's actions (hnsdt.minigrid.world.Actions: left … done; tested equal). Not imported: every
+#               checkpoint load imports this module, and the paper's stages do not depend on hnsdt.minigrid
 VIEW = 7  # MiniGrid's agent_view_size
 N_STATE = 5  # row, col, direction, carried type, carried colour
 N_OBJECTS, N_COLORS, N_DOOR_STATES, N_DIRECTIONS = 11, 6, 3, 4  # minigrid.core.constants' index ranges
