@@ -41,7 +41,6 @@ from hnsdt.data.card import data_md5
 from hnsdt.data.format import EPISODES_TABLE, HNSDT_META, DatasetError, check_dataset, frame_columns
 from hnsdt.data.lerobot_io import LeRobotDataset, _skip_fingerprints, _skip_image_embedding
 from hnsdt.minigrid.collect import STATE_NAMES, SUBGOAL_NAMES
-from hnsdt.models.minigrid_nets import step_states
 from hnsdt.models.windows import Frames, frames_from_arrays
 
 VIEW_NAMES = tuple(f"x{i}y{j}{part}" for i in range(7) for j in range(7) for part in ("obj", "color", "state"))
@@ -125,6 +124,8 @@ def load_minigrid_frames(root: str | Path, with_md5: bool = False) -> Frames | t
     states ``observation.state`` and ``observation.view`` side by side, each frame's sub-goal ``(row, col, type,
     colour)`` (its target cell and its object) as the target; ``with_md5``: and the data files' md5 they were read
     from (checked against the one the dataset recorded)."""
+    from hnsdt.models.minigrid_nets import step_states  # (here: writing a dataset needs no network)
+
     meta = check_dataset(root, {name: f["dtype"] for name, f in FEATURES.items()})
     if "subgoal_kinds" not in meta or meta.get("subgoal_kinds") != list(SUBGOAL_NAMES):
         raise DatasetError(f"dataset {root}: not a MiniGrid dataset of this version (meta/hnsdt.json has no "
