@@ -84,8 +84,7 @@ def main() -> None:
             both = {f.name: np.concatenate([getattr(part, f.name), getattr(add, f.name)])
                     for f in dataclasses.fields(part)}
             both["episode"][len(part):] += part.episode.max() + 1
-            joined = subset(dataclasses.replace(part, **both), np.ones(len(both["episode"]), bool))
-            part = joined
+            part = subset(dataclasses.replace(part, **both), np.ones(len(both["episode"]), bool))  # (starts anew)
         for seed in args.seeds:
             train = TrainConfig(epochs=learn.max_epochs, batch_size=learn.batch_size, lr=learn.lr, seed=seed,
                                 device="cpu", patience=learn.patience)

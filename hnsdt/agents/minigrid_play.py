@@ -103,7 +103,7 @@ def play(model: MiniGridDT | MiniGridActorCritic, env_id: str, jobs: list[Job], 
     alive = list(range(len(games)))
     try:
         while alive:
-            rows, states, kinds, targets, ops = [], [], [], [], []
+            rows, states, kinds, targets, ops, seen = [], [], [], [], [], []
             for i in alive:
                 g = games[i]
                 s = g.state()
@@ -119,13 +119,13 @@ def play(model: MiniGridDT | MiniGridActorCritic, env_id: str, jobs: list[Job], 
                 kinds.append(kind)
                 targets.append(target)
                 ops.append(op.name(g.world) if op else "")
+                seen.append(s)
             if not rows:
                 break
             actions = actor.actions(rows, np.stack(states), kinds, targets, games)
-            for i, a, op in zip(rows, actions, ops):
+            for i, a, op, s in zip(rows, actions, ops, seen):
                 g = games[i]
                 frame = g.env.render() if i in traces else None
-                s = g.state() if i in traces else None
                 g.obs, reward, terminated, truncated, info = g.env.step(int(a))
                 g.steps += 1
                 g.earned += float(reward)

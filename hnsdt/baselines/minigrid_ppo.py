@@ -52,7 +52,7 @@ class _Copies:
     """``num_envs`` MiniGrid envs, each reset onto a training world drawn by ``rng`` when its episode ends."""
 
     def __init__(self, env_id: str, seeds: list[int], fail_probs: list[float], n: int, rng: np.random.Generator):
-        self.env_id, self.seeds, self.rng = env_id, seeds, rng
+        self.seeds, self.rng = seeds, rng
         self.envs = [make_env(env_id, fail_probs[i % len(fail_probs)]) for i in range(n)]
         self.episodes = 0
         self.obs = [None] * n

@@ -17,7 +17,7 @@ from hnsdt.baselines.minigrid_ppo import MiniGridPPOConfig, train_minigrid_ppo
 from hnsdt.compose.params import Params
 from hnsdt.core.methods import OUR_DTS, method
 from hnsdt.data.format import DatasetError
-from hnsdt.data.minigrid_dataset import load_minigrid_frames
+from hnsdt.data.minigrid_dataset import check_minigrid_dataset, load_minigrid_frames
 from hnsdt.evaluation.minigrid import StepsOnWorlds
 from hnsdt.models.minigrid_nets import MiniGridActorCriticConfig, MiniGridDT, MiniGridDTConfig
 from hnsdt.models.train import TrainConfig, train_decision_transformer
@@ -42,14 +42,11 @@ class LearnRun:
 
 def learn_runs(params: Params, env: str, dataset: str) -> list[LearnRun]:
     """Every method × seed of ``minigrid.learn`` on world ``env`` (a key of ``minigrid.envs``)."""
-    from hnsdt.data.format import check_dataset
-    from hnsdt.data.minigrid_dataset import FEATURES
-
     section = params.need("minigrid")
     learn = section.learn
     if learn is None:
         raise params.error("minigrid.learn is missing: the decision transformers' knobs on MiniGrid's worlds")
-    md5 = check_dataset(dataset, {name: f["dtype"] for name, f in FEATURES.items()}).get("data_md5", "")
+    md5 = check_minigrid_dataset(dataset).get("data_md5", "")
     validation = tuple(Job(s, p, 0) for s in learn.validation_seeds.seeds for p in section.fail_probs)
     test = tuple(Job(s, p, k) for s in section.test_seeds.seeds for p in section.fail_probs
                  for k in range(section.episodes))

@@ -155,6 +155,14 @@ def atomic_file(out: str | Path):
         tmp.unlink(missing_ok=True)
 
 
+def write_folder(out: str | Path, files: dict[str, bytes]) -> None:
+    """A folder of named files as one output (recordings): built beside ``out``, moved into place when complete."""
+    with atomic_dir(out) as work:
+        work.mkdir(parents=True)
+        for name, data in files.items():
+            (work / name).write_bytes(data)
+
+
 def write_files(files: dict[Path, bytes]) -> None:
     """Several files as one output (a recording's ``.rrd`` and ``.mcap``): each written to a temporary beside it,
     then all renamed into place; a failure while writing any of them leaves none."""

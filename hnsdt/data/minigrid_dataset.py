@@ -119,6 +119,15 @@ def write_minigrid_dataset(root: str | Path, repo_id: str, episodes: list[dict],
     return root
 
 
+def check_minigrid_dataset(root: str | Path) -> dict:
+    """Validate a MiniGrid dataset's files and features (one :class:`DatasetError` line); its ``meta/hnsdt.json``."""
+    meta = check_dataset(root, {name: f["dtype"] for name, f in FEATURES.items()})
+    if meta.get("subgoal_kinds") != list(SUBGOAL_NAMES):
+        raise DatasetError(f"dataset {root}: not a MiniGrid dataset of this version (meta/hnsdt.json has no "
+                           f"subgoal_kinds {list(SUBGOAL_NAMES)}); run `dvc repro minigrid_collect`")
+    return meta
+
+
 def load_minigrid_frames(root: str | Path, with_md5: bool = False) -> Frames | tuple[Frames, str]:
     """The dataset's frames as the MiniGrid decision transformer reads them (:mod:`hnsdt.models.minigrid_nets`):
     states ``observation.state`` and ``observation.view`` side by side, each frame's sub-goal ``(row, col, type,
@@ -126,10 +135,7 @@ def load_minigrid_frames(root: str | Path, with_md5: bool = False) -> Frames | t
     from (checked against the one the dataset recorded)."""
     from hnsdt.models.minigrid_nets import step_states  # (here: writing a dataset needs no network)
 
-    meta = check_dataset(root, {name: f["dtype"] for name, f in FEATURES.items()})
-    if "subgoal_kinds" not in meta or meta.get("subgoal_kinds") != list(SUBGOAL_NAMES):
-        raise DatasetError(f"dataset {root}: not a MiniGrid dataset of this version (meta/hnsdt.json has no "
-                           f"subgoal_kinds {list(SUBGOAL_NAMES)}); run `dvc repro minigrid_collect`")
+    meta = check_minigrid_dataset(root)
     cols = frame_columns(root, ["observation.state", "observation.view", "action", "next.reward", "subgoal",
                                 "subgoal.target", "subgoal.object", "episode_index", "frame_index"])
     frames = frames_from_arrays(step_states(cols["observation.state"], cols["observation.view"]), cols["action"],

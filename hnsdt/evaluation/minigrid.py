@@ -49,9 +49,10 @@ def reference_rows(env_id: str, seeds: Iterable[int], fail_probs: Iterable[float
 
 
 class StepsOnWorlds:
-    """A validation measure for a MiniGrid decision transformer (lower is better): the mean steps of its episodes
-    on ``jobs`` (validation worlds × fail_probs), an episode not done within ``max_steps`` counting as
-    ``max_steps`` — which is then the ``ceiling``, the value of a model that never reaches its goal
+    """A validation measure for a MiniGrid learner (a decision transformer, PPO's actor-critic; lower is better):
+    the mean steps of its episodes on ``jobs`` (validation worlds × fail_probs), an episode not done within
+    ``max_steps`` counting as ``max_steps`` — which is then the ``ceiling``, the value of a model that never reaches
+    its goal
     (:class:`hnsdt.models.fit.Validation`). Plays greedily from fixed worlds and failure streams: it draws no
     random numbers of the training's."""
 

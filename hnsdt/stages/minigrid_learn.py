@@ -21,7 +21,7 @@ def minigrid_learn(params: Params, env: str, dataset: Path, out: Path, recorded:
     0, the first test world; their own output, as rerun's bytes vary from run to run)."""
     from hnsdt.compose.minigrid import learn, learn_runs
     from hnsdt.core.compute import run_tasks
-    from hnsdt.core.fileio import atomic_dir, finished_tasks
+    from hnsdt.core.fileio import atomic_dir, finished_tasks, write_folder
     from hnsdt.evaluation.minigrid import (LEARNED_COLUMNS, ROW_COLUMNS, learned_recordings, played_rows,
                                            summarise_seeds, to_csv)
     from hnsdt.models.checkpoint import save_checkpoint
@@ -52,13 +52,11 @@ def minigrid_learn(params: Params, env: str, dataset: Path, out: Path, recorded:
             (work / "provenance.json").write_text(json.dumps({"env": env, "id": section.envs[env].id,
                                                               **provenance(params)}, indent=1) + "\n")
     if recorded is not None:
-        first = {m: models[(m, s)] for (m, s) in models if s == min(r.seed for r in runs)}
+        seed = min(r.seed for r in runs)
+        first = {m: model for (m, s), model in models.items() if s == seed}
         files = learned_recordings(section.envs[env].id, first, section.test_seeds.first, section.fail_probs,
                                    section.learn.target_return, provenance(params))
-        with atomic_dir(recorded) as work:
-            work.mkdir(parents=True)
-            for name, data in files.items():
-                (work / name).write_bytes(data)
+        write_folder(recorded, files)
         print(f"wrote {len(files)} recordings to {recorded}")
     print(f"wrote {out}")
     return Path(out)

@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from hnsdt.compose.config import Params
-from hnsdt.core.fileio import atomic_dir
+from hnsdt.core.fileio import atomic_dir, write_folder
 from hnsdt.stages.common import provenance
 
 
@@ -33,10 +33,7 @@ def minigrid_reference(params: Params, env: str, out: Path, recorded: Path | Non
                                                          indent=1) + "\n")
     if recorded is not None:
         files = recordings(env_id, section.test_seeds.first, section.fail_probs, provenance(params))
-        with atomic_dir(recorded) as work:
-            work.mkdir(parents=True)
-            for name, data in files.items():
-                (work / name).write_bytes(data)
+        write_folder(recorded, files)
         print(f"wrote {len(files)} recordings to {recorded}")
     print(f"wrote {out}")
     return Path(out)
