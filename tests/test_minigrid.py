@@ -48,6 +48,51 @@ def test_phi_and_the_rules_agree_with_minigrid_stepping_on_random_actions(env_id
     assert CARRIED in seen and 0 in seen  # (something was carried and a door opened: the walk did get somewhere)
 
 
+@pytest.mark.parametrize("env_id", WORLDS + ("MiniGrid-DoorKey-16x16-v0", "MiniGrid-KeyCorridorS3R3-v0",
+                                              "MiniGrid-FourRooms-v0", "MiniGrid-LavaCrossingS9N1-v0",
+                                              "MiniGrid-ObstructedMaze-2Dlhb-v1", "MiniGrid-Fetch-8x8-N3-v0"))
+def test_our_observation_is_minigrids_own_to_the_byte(env_id):
+    """make_env's envs compute the observation with hnsdt.minigrid.view.gen_obs; on random walks (every action,
+    doors opened, things carried and dropped, episodes ended and begun) it is MiniGridEnv.gen_obs's, byte for byte —
+    and an env that sees through walls (Fetch) keeps MiniGrid's own."""
+    from minigrid.minigrid_env import MiniGridEnv
+
+    rng = np.random.default_rng(1)
+    env = make_env(env_id)
+    u = env.unwrapped
+    assert ("gen_obs" in vars(u)) == (not u.see_through_walls)
+    checked = set()
+    for seed in range(4):
+        obs, _ = env.reset(seed=seed)
+        for _ in range(250):
+            want = MiniGridEnv.gen_obs(u)
+            assert obs["image"].dtype == want["image"].dtype and np.array_equal(obs["image"], want["image"])
+            assert (obs["direction"], obs["mission"]) == (want["direction"], want["mission"])
+            checked.add((u.agent_dir, u.carrying is not None))
+            obs, _, terminated, truncated, _ = env.step(int(rng.choice(7, p=[0.2, 0.2, 0.3, 0.1, 0.08, 0.1, 0.02])))
+            if terminated or truncated:
+                break
+    assert {d for d, _ in checked} == {0, 1, 2, 3}
+
+
+def test_a_view_that_differs_from_minigrids_is_caught():
+    """The check above can fail: a view that lets the agent see through walls differs on a DoorKey world."""
+    from minigrid.minigrid_env import MiniGridEnv
+
+    from hnsdt.minigrid import view
+
+    env = make_env("MiniGrid-DoorKey-8x8-v0")
+    env.reset(seed=3)
+    u = env.unwrapped
+    see_all = lambda v, n: [[True] * n for _ in range(n)]  # noqa: E731
+    original, view._visible = view._visible, see_all
+    try:
+        assert any(not np.array_equal(view.gen_obs(u)["image"], MiniGridEnv.gen_obs(u)["image"])
+                   for _ in range(8) if env.step(1) is not None)
+    finally:
+        view._visible = original
+
+
 def test_a_predicate_the_rules_get_wrong_is_caught():
     """The check above can fail: with toggle made to open a locked door without its key, φ disagrees."""
     env_id = "MiniGrid-DoorKey-5x5-v0"
