@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 import yaml
 
-from hnsdt.core.methods import METHODS
+from hnsdt.core.methods import METHODS, MINIGRID_LEARNERS
 from conftest import hnsdt_cli
 from tiny_repo import REPO, STAGES, UNSEEN, changed_stages, kept_in_git, ran_stages, run
 
@@ -110,12 +110,11 @@ def test_repro_runs_everything_then_nothing(repo_copy, first_run):
         "babyai_bot_fp0.2.mcap", "babyai_bot_fp0.2.rrd", "symbolic_fp0.2.mcap", "symbolic_fp0.2.rrd"]
     from lerobot.datasets.lerobot_dataset import LeRobotDataset  # (stock, offline: 2 worlds x 1 fail_prob)
     assert LeRobotDataset("local/minigrid-doorkey8", root=repo_copy / "minigrid/doorkey8/dataset").num_episodes == 2
-    learned = pd.read_csv(repo_copy / "minigrid/doorkey8/learned/summary.csv")  # both transformers, played
-    assert set(learned.method) == {"hnsdt", "pure_dt", "ppo"} and (learned.seeds == 1).all()
+    learned = pd.read_csv(repo_copy / "minigrid/doorkey8/learned/summary.csv")  # every learner, played
+    assert set(learned.method) == set(MINIGRID_LEARNERS) and (learned.seeds == 1).all()
     assert (repo_copy / "minigrid/doorkey8/learned/models/hnsdt/seed0/model.safetensors").is_file()
-    assert sorted(p.name for p in (repo_copy / "minigrid/doorkey8/learned_recordings").iterdir()) == [
-        "hnsdt_fp0.2.mcap", "hnsdt_fp0.2.rrd", "ppo_fp0.2.mcap", "ppo_fp0.2.rrd", "pure_dt_fp0.2.mcap",
-        "pure_dt_fp0.2.rrd"]
+    assert sorted(p.name for p in (repo_copy / "minigrid/doorkey8/learned_recordings").iterdir()) == sorted(
+        f"{m}_fp0.2{suffix}" for m in MINIGRID_LEARNERS for suffix in (".mcap", ".rrd"))
     rrds = sorted((repo_copy / "recordings").rglob("*.rrd"))
     verify = subprocess.run([str(Path(sys.executable).parent / "rerun"), "rrd", "verify", *map(str, rrds)],
                             capture_output=True, text=True)  # every recording, by rerun's own verifier

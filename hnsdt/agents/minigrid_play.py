@@ -1,12 +1,13 @@
-"""The decision transformers acting in MiniGrid's own worlds (:mod:`hnsdt.models.minigrid_nets`): HNSDT under the
-symbolic planner, and the pure DT.
+"""The learners acting in MiniGrid's own worlds (:mod:`hnsdt.models.minigrid_nets`): HNSDT under the symbolic
+planner, the pure DT, the recurrent controllers and PPO's actor-critic.
 
 HNSDT: at every step the planner's operator at the head of its plan (the symbolic agent's plan-keeping,
 :class:`hnsdt.minigrid.controllers.SymbolicAgent`: drop what the state has achieved, replan from the true state
 when the next operator can no longer be done) becomes the step's sub-goal token, and the transformer picks the
 action — the hand-written controllers never act. The pure DT reads a return-to-go instead (the target return,
-less what the episode has earned). The actor-critic reads the current step alone. All act greedily (the most
-likely action).
+less what the episode has earned). The recurrent controllers (the LSTM, the GRU) carry their recurrent state
+through the episode, and the hierarchical one picks its own sub-goal. The actor-critic reads the current step
+alone. All act greedily (the most likely action).
 
 Many episodes are played in lockstep (one row each of the transformer's key/value cache), so that each step is one
 forward pass for all of them; each episode ends when MiniGrid ends it (success, or its own step limit) or at
@@ -24,7 +25,7 @@ from hnsdt.minigrid.collect import state_vector, subgoal_of
 from hnsdt.minigrid.controllers import SymbolicAgent
 from hnsdt.minigrid.live import Episode, GaveUp, Step, carried_name, close_trace, make_env, read_world, snapshot
 from hnsdt.minigrid.operators import PlanState
-from hnsdt.models.minigrid_nets import MiniGridActorCritic, MiniGridDT, step_states
+from hnsdt.models.minigrid_nets import MiniGridActorCritic, MiniGridDT, MiniGridRecurrent, step_states
 
 
 @dataclass(frozen=True)
@@ -78,6 +79,29 @@ class _Transformer:
         return actions
 
 
+class _Recurrent:
+    """A recurrent controller's acting: each episode's recurrent state (a column of one batch) and previous action;
+    the hierarchical one picks its own sub-goal (no planner)."""
+
+    def __init__(self, model: MiniGridRecurrent, n: int):
+        rnn = model.rnn
+        zeros = lambda: torch.zeros(rnn.num_layers, n, rnn.hidden_size)  # noqa: E731
+        self.model = model
+        self.hidden = (zeros(), zeros()) if isinstance(rnn, torch.nn.LSTM) else (zeros(),)
+        self.prev = np.full(n, model.n_actions, np.int64)  # (the start token before the first step)
+
+    def actions(self, rows: list[int], states, kinds, targets, games) -> np.ndarray:
+        index = torch.as_tensor(rows)
+        hidden = tuple(h[:, index] for h in self.hidden)
+        logits, _, new = self.model.step(torch.as_tensor(states), torch.as_tensor(self.prev[rows]),
+                                         hidden if len(hidden) == 2 else hidden[0])
+        for old, part in zip(self.hidden, new if isinstance(new, tuple) else (new,)):
+            old[:, index] = part
+        actions = logits.argmax(-1).cpu().numpy()
+        self.prev[rows] = actions
+        return actions
+
+
 class _ActorCritic:
     """The actor-critic's acting: the most likely action of the current step."""
 
@@ -90,7 +114,7 @@ class _ActorCritic:
         return logits.argmax(-1).cpu().numpy()
 
 
-def play(model: MiniGridDT | MiniGridActorCritic, env_id: str, jobs: list[Job], target_return: float = 1.0,
+def play(model: MiniGridDT | MiniGridRecurrent | MiniGridActorCritic, env_id: str, jobs: list[Job], target_return: float = 1.0,
          max_steps: int = 0, traces: dict[int, list[Step]] | None = None) -> list[Episode]:
     """Play every job with ``model`` (eval mode); the episodes in job order. ``traces``: job index -> a list that
     gets each step's :class:`Step` (MiniGrid's drawing of the world before it) and a closing frame."""
@@ -99,7 +123,7 @@ def play(model: MiniGridDT | MiniGridActorCritic, env_id: str, jobs: list[Job], 
     games = [_Game(env_id, job, subgoals, i in traces) for i, job in enumerate(jobs)]
     done: list[Episode | None] = [None] * len(games)
     actor = (_Transformer(model, len(games), target_return) if isinstance(model, MiniGridDT)
-             else _ActorCritic(model))
+             else _Recurrent(model, len(games)) if isinstance(model, MiniGridRecurrent) else _ActorCritic(model))
     alive = list(range(len(games)))
     try:
         while alive:

@@ -50,14 +50,16 @@ def training_episodes(frames: Frames, behaviours=()) -> tuple[np.ndarray, np.nda
     return starts, lengths
 
 
-def episode_batch(frames: Frames, starts: np.ndarray, lengths: np.ndarray) -> dict[str, np.ndarray]:
-    """Whole episodes, right-padded to the longest: states, previous actions, actions, sub-goals, mask."""
+def episode_batch(frames: Frames, starts: np.ndarray, lengths: np.ndarray, start_action: int = START_ACTION
+                  ) -> dict[str, np.ndarray]:
+    """Whole episodes, right-padded to the longest: states, previous actions (``start_action`` before the first),
+    actions, sub-goals, mask."""
     T = int(lengths.max())
     t = np.arange(T)
     mask = t[None, :] < lengths[:, None]
     idx = np.where(mask, starts[:, None] + t[None, :], starts[:, None])
     actions = frames.actions[idx]
-    prev = np.concatenate([np.full((len(starts), 1), START_ACTION), actions[:, :-1]], axis=1)
+    prev = np.concatenate([np.full((len(starts), 1), start_action), actions[:, :-1]], axis=1)
     return {"states": frames.states[idx], "prev_actions": prev, "actions": actions,
             "subgoals": frames.subgoals[idx], "mask": mask}
 
@@ -78,7 +80,7 @@ def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTr
     validation = Validation(measure, cfg.patience) if cfg.patience else None
     per_epoch = int(np.ceil(len(starts) / cfg.batch_size))
     objective = Objective(
-        np.arange(len(starts)), lambda rows: episode_batch(frames, starts[rows], lengths[rows]),
+        np.arange(len(starts)), lambda rows: episode_batch(frames, starts[rows], lengths[rows], network.n_actions),
         lambda rows: int(lengths[rows].sum()),
         lambda step, epoch, seen, loss: {"step": step, "epoch": step / per_epoch, "frames_seen": seen, "loss": loss},
         clip_grad_norm=1.0, augment=turned_maps(model_cfg, cfg.symmetries, cfg.seed))

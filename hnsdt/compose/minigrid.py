@@ -1,6 +1,7 @@
-"""The decision transformers on MiniGrid's own worlds, one run per method and training seed: train on the world's
-dataset (:mod:`hnsdt.data.minigrid_dataset`) to the plateau of the steps on validation worlds, then play every
-test world and fail_prob (:func:`hnsdt.agents.minigrid_play.play`).
+"""The learners on MiniGrid's own worlds, one run per method and training seed: the decision transformers and the
+RNN baselines trained on the world's dataset (:mod:`hnsdt.data.minigrid_dataset`), PPO in its training worlds,
+each to the plateau of its steps on validation worlds; then every test world and fail_prob played
+(:func:`hnsdt.agents.minigrid_play.play`).
 
 A run is a frozen :class:`LearnRun` (the dataset by path and md5, the knobs, the worlds) handed to :func:`learn` on
 the stage's executor (:mod:`hnsdt.core.compute`); it returns the weights, the curve, what the training used and
@@ -15,11 +16,13 @@ from functools import lru_cache
 from hnsdt.agents.minigrid_play import Job, play
 from hnsdt.baselines.minigrid_ppo import MiniGridPPOConfig, train_minigrid_ppo
 from hnsdt.compose.params import Params
-from hnsdt.core.methods import OUR_DTS, method
+from hnsdt.baselines.recurrent import RecurrentTrainConfig, train_recurrent
+from hnsdt.core.methods import OFFLINE_BASELINES, OUR_DTS, method
 from hnsdt.data.format import DatasetError
 from hnsdt.data.minigrid_dataset import check_minigrid_dataset, load_minigrid_frames
 from hnsdt.evaluation.minigrid import StepsOnWorlds
-from hnsdt.models.minigrid_nets import MiniGridActorCriticConfig, MiniGridDT, MiniGridDTConfig
+from hnsdt.models.minigrid_nets import (MiniGridActorCriticConfig, MiniGridDT, MiniGridDTConfig, MiniGridRecurrent,
+                                        MiniGridRecurrentConfig)
 from hnsdt.models.train import TrainConfig, train_decision_transformer
 
 
@@ -28,10 +31,11 @@ class LearnRun:
     env_id: str
     dataset: str  # the world's LeRobot dataset
     data_md5: str  # ... whose bytes the run was planned on
-    method: str  # hnsdt, pure_dt or ppo
+    method: str  # a MiniGrid learner of the registry (hnsdt.core.methods.MINIGRID_LEARNERS)
     seed: int
-    model: tuple  # the network's config fields (MiniGridDTConfig's, MiniGridActorCriticConfig's) as (name, value)
-    train: tuple  # the trainer's (TrainConfig's, MiniGridPPOConfig's)
+    model: tuple  # the network's config fields (MiniGridDTConfig's, MiniGridRecurrentConfig's,
+    #               MiniGridActorCriticConfig's) as (name, value)
+    train: tuple  # the trainer's (TrainConfig's, RecurrentTrainConfig's, MiniGridPPOConfig's)
     validation: tuple[Job, ...]
     validation_max_steps: int
     test: tuple[Job, ...]
@@ -56,6 +60,8 @@ def learn_runs(params: Params, env: str, dataset: str) -> list[LearnRun]:
             model = MiniGridDTConfig(condition=method(name).condition, **learn.model.model_dump())
             train = TrainConfig(epochs=learn.max_epochs, batch_size=learn.batch_size, lr=learn.lr, seed=0,
                                 device="cpu", patience=learn.patience, log_every=10)
+        elif name in OFFLINE_BASELINES:  # the network and its batches as in the paper's worlds (baselines.<name>)
+            model, train = _recurrent_settings(params, name, learn)
         else:
             model, train = MiniGridActorCriticConfig(), MiniGridPPOConfig(**learn.ppo.model_dump())
         for seed in learn.seeds:
@@ -64,6 +70,25 @@ def learn_runs(params: Params, env: str, dataset: str) -> list[LearnRun]:
                                  validation, learn.validation_max_steps, test, learn.target_return,
                                  tuple(section.collect.train_seeds.seeds), tuple(section.fail_probs)))
     return runs
+
+
+RECURRENT_KNOBS = ("n_layers", "hidden", "embed", "batch_size", "lr")  # read from baselines.<name>
+
+
+def _recurrent_settings(params: Params, name: str, learn) -> tuple[MiniGridRecurrentConfig, RecurrentTrainConfig]:
+    """An RNN baseline's network and trainer on MiniGrid: its size, batch (whole episodes) and learning rate from
+    ``baselines.<name>`` (one place for them), the epoch cap and patience of ``minigrid.learn``."""
+    section = (params.need("baselines").model_extra or {}).get(name)
+    missing = [k for k in RECURRENT_KNOBS if k not in (section or {})]
+    if missing:
+        raise params.error(f"baselines.{name} lacks {', '.join(missing)}: {name}'s network and batches on "
+                           "MiniGrid's worlds")
+    model = MiniGridRecurrentConfig(**method(name).fixed, n_layers=int(section["n_layers"]),
+                                    hidden=int(section["hidden"]), embed=int(section["embed"]),
+                                    cell_dim=learn.model.cell_dim)
+    train = RecurrentTrainConfig(epochs=learn.max_epochs, batch_size=int(section["batch_size"]),
+                                 lr=float(section["lr"]), seed=0, device="cpu", patience=learn.patience)
+    return model, train
 
 
 @lru_cache(maxsize=1)
@@ -85,6 +110,10 @@ def learn(run: LearnRun) -> dict:
         model, curve, usage = train_decision_transformer(_frames(run.dataset, run.data_md5), cfg,
                                                          TrainConfig(**dict(run.train)), progress=False,
                                                          network=MiniGridDT, measure=measure)
+    elif run.method in OFFLINE_BASELINES:
+        cfg = MiniGridRecurrentConfig(**dict(run.model))
+        model, curve, usage = train_recurrent(_frames(run.dataset, run.data_md5), cfg, RecurrentTrainConfig(
+            **dict(run.train)), progress=False, network=MiniGridRecurrent, measure=measure)
     else:
         cfg = MiniGridActorCriticConfig(**dict(run.model))
         model, curve, usage = train_minigrid_ppo(run.env_id, list(run.train_seeds), list(run.fail_probs), cfg,

@@ -1,12 +1,14 @@
 """The networks on MiniGrid's own worlds (:mod:`hnsdt.minigrid`), reading what a MiniGrid agent sees and acting with
 MiniGrid's seven actions: the decision transformer of :mod:`hnsdt.models.dt` (episode formulation, one token per
-step; :class:`MiniGridDT`) and PPO's actor-critic (:class:`MiniGridActorCritic`).
+step; :class:`MiniGridDT`), the RNN baselines' controllers of :mod:`hnsdt.models.recurrent`
+(:class:`MiniGridRecurrent`) and PPO's actor-critic (:class:`MiniGridActorCritic`).
 
 A step's state vector (:func:`step_states`) is ``row, col, direction, carried type, carried colour`` and then
 MiniGrid's own observation ``image``, the 7 × 7 cells ahead of the agent (egocentric, each cell's object, colour
 and state indices, flattened): the datasets' ``observation.state`` and ``observation.view`` side by side. The
-network embeds each cell's three indices (summed, then the 49 cells flattened and projected), the direction and
-what is carried — never the absolute cell, which is there only to place the sub-goal's target.
+transformer and the recurrent controllers embed each cell's three indices (summed, then the 49 cells flattened and
+projected), the direction and what is carried (:class:`ViewStates`) — never the absolute cell, which is there only
+to place the sub-goal's target.
 
 HNSDT's sub-goal token (each step's own, ``condition="subgoal"``) is the operator's kind (goto_object, goto_door,
 goto_goal, pickup, open, drop), what it is about (MiniGrid's type and colour of its object, door or goal) and its
@@ -27,6 +29,7 @@ import torch.nn as nn
 from hnsdt.models.dt import DecisionTransformer, DTConfig
 from hnsdt.models.kernels import Linear
 from hnsdt.models.network import Network
+from hnsdt.models.recurrent import RecurrentConfig, RecurrentPolicy
 
 N_ACTIONS = 7  # MiniGrid's actions (hnsdt.minigrid.world.Actions: left … done; tested equal). Not imported: every
 #               checkpoint load imports this module, and the paper's stages do not depend on hnsdt.minigrid
@@ -55,8 +58,10 @@ class MiniGridDTConfig(DTConfig):
             raise ValueError("the MiniGrid decision transformer is conditioned on sub-goals or returns, not 'none'")
 
 
-class MiniGridDT(DecisionTransformer, arch="minigrid_decision_transformer", config=MiniGridDTConfig):
-    n_actions = N_ACTIONS
+class ViewStates:
+    """How a MiniGrid network reads a :func:`step_states` vector (a mixin before the network's base class): each of
+    the 49 view cells' three indices embedded and summed, the cells flattened and projected, plus the direction's
+    and the carried object's embeddings — never the absolute cell."""
 
     def build_state_encoder(self, width: int) -> None:
         c = self.cfg.cell_dim
@@ -73,6 +78,10 @@ class MiniGridDT(DecisionTransformer, arch="minigrid_decision_transformer", conf
         view = self.object_emb(cells[..., 0]) + self.color_emb(cells[..., 1]) + self.door_state_emb(cells[..., 2])
         return (self.view_proj(view.flatten(-2)) + self.direction_emb(states[..., 2])
                 + self.carried_type_emb(states[..., 3]) + self.carried_color_emb(states[..., 4]))
+
+
+class MiniGridDT(ViewStates, DecisionTransformer, arch="minigrid_decision_transformer", config=MiniGridDTConfig):
+    n_actions = N_ACTIONS
 
     def build_subgoal_encoder(self, width: int) -> None:
         span = 2 * self.cfg.max_offset + 2  # offsets -m … m, and 0 = no target
@@ -109,6 +118,23 @@ def step_states(state: np.ndarray, view: np.ndarray) -> np.ndarray:
     """The network's state vectors: ``observation.state`` (…, 5) and ``observation.view`` (…, 147) side by side."""
     return np.concatenate([np.asarray(state, np.int64), np.asarray(view, np.int64).reshape(*np.shape(state)[:-1],
                                                                                             -1)], axis=-1)
+
+
+@dataclass
+class MiniGridRecurrentConfig(RecurrentConfig):
+    n_flags: int = 0  # (unused here, as the transformer's)
+    grid_h: int = 0
+    grid_w: int = 0
+    cell_dim: int = 16  # each view cell's embedding, as the transformer's
+
+
+class MiniGridRecurrent(ViewStates, RecurrentPolicy, arch="minigrid_recurrent", config=MiniGridRecurrentConfig):
+    """The RNN baselines on MiniGrid (:class:`hnsdt.models.recurrent.RecurrentPolicy`: the LSTM hierarchical
+    controller, the GRU sequential one) reading MiniGrid's view; the hierarchical one's sub-goal head predicts the
+    operator's kind (the dataset's ``subgoal``), which its action head then reads — no planner when it acts."""
+
+    n_actions = N_ACTIONS
+    n_subgoals = N_KINDS
 
 
 @dataclass

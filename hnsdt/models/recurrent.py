@@ -24,7 +24,8 @@ from hnsdt.models.network import Network
 from hnsdt.symbolic.subgoals import VOCAB_SIZE
 
 CELLS = ("lstm", "gru")
-START_ACTION = N_ACTIONS  # the "previous action" of an episode's first step
+START_ACTION = N_ACTIONS  # the "previous action" of an episode's first step (RecurrentPolicy's; a subclass's: its
+#                          n_actions)
 
 
 @dataclass
@@ -47,19 +48,23 @@ class RecurrentConfig:
 
 
 class RecurrentPolicy(Network, arch="recurrent", config=RecurrentConfig):
+    n_actions = N_ACTIONS  # the action head's outputs; this index is the start token (START_ACTION). A network for
+    #                        another world's actions sets its own (hnsdt.models.minigrid_nets)
+    n_subgoals = VOCAB_SIZE  # the hierarchical sub-goal head's outputs: the dataset's sub-goal ids
+
     def __init__(self, cfg: RecurrentConfig):
         super().__init__(cfg)
         d, h = cfg.embed, cfg.hidden
         self.build_state_encoder(d)
-        self.prev_action_emb = nn.Embedding(N_ACTIONS + 1, d)
+        self.prev_action_emb = nn.Embedding(self.n_actions + 1, d)
         rnn = nn.LSTM if cfg.cell == "lstm" else nn.GRU
         self.rnn = rnn(d, h, cfg.n_layers, batch_first=True, dropout=cfg.dropout if cfg.n_layers > 1 else 0.0)
         if cfg.hierarchical:
-            self.subgoal_head = nn.Linear(h, VOCAB_SIZE)
-            self.subgoal_emb = nn.Embedding(VOCAB_SIZE, h)
-            self.action_head = nn.Sequential(nn.Linear(2 * h, h), nn.ReLU(), nn.Linear(h, N_ACTIONS))
+            self.subgoal_head = nn.Linear(h, self.n_subgoals)
+            self.subgoal_emb = nn.Embedding(self.n_subgoals, h)
+            self.action_head = nn.Sequential(nn.Linear(2 * h, h), nn.ReLU(), nn.Linear(h, self.n_actions))
         else:
-            self.action_head = nn.Linear(h, N_ACTIONS)
+            self.action_head = nn.Linear(h, self.n_actions)
 
     def build_state_encoder(self, width: int) -> None:
         """The state's part, built first: ``(row, col)`` embeddings plus a linear map of the flags (a network
@@ -75,7 +80,7 @@ class RecurrentPolicy(Network, arch="recurrent", config=RecurrentConfig):
 
     def forward(self, states, prev_actions, subgoals=None, hidden=None):
         """states (B, T, d) int64, prev_actions (B, T) int64; ``subgoals`` (B, T) feeds the hierarchical action
-        head (None: its own argmax). Returns action logits (B, T, 5), sub-goal logits (B, T, V) or None, and
+        head (None: its own argmax). Returns action logits (B, T, n_actions), sub-goal logits (B, T, V) or None, and
         the recurrent state to continue from."""
         x = self.embed_states(states) + self.prev_action_emb(prev_actions)
         out, hidden = self.rnn(x, hidden)
@@ -89,7 +94,7 @@ class RecurrentPolicy(Network, arch="recurrent", config=RecurrentConfig):
 
     @torch.no_grad()
     def step(self, states, prev_actions, hidden=None):
-        """Acting: one step of N episodes, states (N, d), prev_actions (N,); returns action logits (N, 5),
+        """Acting: one step of N episodes, states (N, d), prev_actions (N,); returns action logits (N, n_actions),
         sub-goal logits (N, V) or None, and the recurrent state (as :meth:`forward`'s). The same numbers as
         :meth:`forward` up to rounding (tested), every product on OpenBLAS (:func:`recurrent_step`): torch's fused
         LSTM runs oneDNN's RNN code, whose bytes follow the CPU and which takes about 2 ms a step at a few
@@ -121,9 +126,9 @@ class RecurrentPolicy(Network, arch="recurrent", config=RecurrentConfig):
 
     def _nll_sum(self, batch: dict) -> torch.Tensor:
         logits, sub_logits, _ = self(batch["states"], batch["prev_actions"], batch.get("subgoals"))
-        nll = F.cross_entropy(logits.reshape(-1, N_ACTIONS), batch["actions"].reshape(-1), reduction="none")
+        nll = F.cross_entropy(logits.reshape(-1, self.n_actions), batch["actions"].reshape(-1), reduction="none")
         if sub_logits is not None:
-            nll = nll + F.cross_entropy(sub_logits.reshape(-1, VOCAB_SIZE), batch["subgoals"].reshape(-1),
+            nll = nll + F.cross_entropy(sub_logits.reshape(-1, self.n_subgoals), batch["subgoals"].reshape(-1),
                                         reduction="none")
         return (nll * batch["mask"].reshape(-1).float()).sum()
 

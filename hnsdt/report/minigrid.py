@@ -1,6 +1,7 @@
 """The section on MiniGrid's own worlds: per world and fail_prob, the exact optimum beside MiniGrid's BabyAI bot and
-the symbolic agent (planner + hand-written controllers), and the decision transformers trained on each world's
-dataset (HNSDT: the same planner, the transformer in place of the controllers; the pure DT)."""
+the symbolic agent (planner + hand-written controllers), and the learners: the decision transformers and the RNNs
+trained on each world's dataset (HNSDT: the same planner, the transformer in place of the controllers; the pure DT;
+the LSTM and the GRU), PPO in its training worlds."""
 
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 """Stage `minigrid_learn`: the learners on one of MiniGrid's own worlds (``minigrid.envs.<name>``) — the decision
-transformers (HNSDT, the pure DT) trained on its dataset, PPO in its training worlds — played on every test world
-and fail_prob."""
+transformers (HNSDT, the pure DT) and the RNNs (the LSTM, the GRU) trained on its dataset, PPO in its training
+worlds — played on every test world and fail_prob."""
 
 from __future__ import annotations
 
