@@ -108,7 +108,15 @@ def test_the_recurrent_controllers_act_step_by_step_as_their_whole_episode_pass(
                                                       embed=16)).eval()
     assert model.n_actions == 7 and (not hierarchical or model.subgoal_head.out_features == N_KINDS)
     episodes = [_random_states(T) for _ in range(3)]
-    actor, chosen = _Recurrent(model, 3), [[], [], []]
+    actor, chosen, stepped = _Recurrent(model, 3), [[], [], []], [[], [], []]
+    step = model.step
+
+    def recorded(states, prev, hidden):  # (what play's acting computed, per episode and step)
+        out = step(states, prev, hidden)
+        for k, i in enumerate(rows):
+            stepped[i].append(out[0][k])
+        return out
+    model.step = recorded
     for t in range(T):
         rows = [0, 1, 2] if t < 4 else [0, 2]  # (episode 1 ends after 4 steps)
         got = actor.actions(rows, torch.cat([episodes[i][:, t] for i in rows]).numpy(), None, None, None)
@@ -119,6 +127,7 @@ def test_the_recurrent_controllers_act_step_by_step_as_their_whole_episode_pass(
         prev = torch.tensor([[model.n_actions] + chosen[i][:-1]])
         with torch.no_grad():
             logits, sub_logits, _ = model(ep[:, :n], prev)
+        assert torch.allclose(torch.stack(stepped[i]), logits[0], atol=1e-4), (cell, i)
         assert logits[0].argmax(-1).tolist() == chosen[i], (cell, i)
         assert (sub_logits is not None) == hierarchical
 

@@ -84,19 +84,18 @@ class _Recurrent:
     the hierarchical one picks its own sub-goal (no planner)."""
 
     def __init__(self, model: MiniGridRecurrent, n: int):
-        rnn = model.rnn
-        zeros = lambda: torch.zeros(rnn.num_layers, n, rnn.hidden_size)  # noqa: E731
-        self.model = model
-        self.hidden = (zeros(), zeros()) if isinstance(rnn, torch.nn.LSTM) else (zeros(),)
+        rnn, self.model = model.rnn, model
+        self.lstm = isinstance(rnn, torch.nn.LSTM)  # (its state is (h, c); a GRU's h alone)
+        self.parts = [torch.zeros(rnn.num_layers, n, rnn.hidden_size) for _ in range(2 if self.lstm else 1)]
         self.prev = np.full(n, model.n_actions, np.int64)  # (the start token before the first step)
 
     def actions(self, rows: list[int], states, kinds, targets, games) -> np.ndarray:
         index = torch.as_tensor(rows)
-        hidden = tuple(h[:, index] for h in self.hidden)
+        hidden = tuple(part[:, index] for part in self.parts)
         logits, _, new = self.model.step(torch.as_tensor(states), torch.as_tensor(self.prev[rows]),
-                                         hidden if len(hidden) == 2 else hidden[0])
-        for old, part in zip(self.hidden, new if isinstance(new, tuple) else (new,)):
-            old[:, index] = part
+                                         hidden if self.lstm else hidden[0])
+        for part, rows_new in zip(self.parts, new if self.lstm else (new,)):
+            part[:, index] = rows_new
         actions = logits.argmax(-1).cpu().numpy()
         self.prev[rows] = actions
         return actions
@@ -114,8 +113,8 @@ class _ActorCritic:
         return logits.argmax(-1).cpu().numpy()
 
 
-def play(model: MiniGridDT | MiniGridRecurrent | MiniGridActorCritic, env_id: str, jobs: list[Job], target_return: float = 1.0,
-         max_steps: int = 0, traces: dict[int, list[Step]] | None = None) -> list[Episode]:
+def play(model: MiniGridDT | MiniGridRecurrent | MiniGridActorCritic, env_id: str, jobs: list[Job],
+         target_return: float = 1.0, max_steps: int = 0, traces: dict[int, list[Step]] | None = None) -> list[Episode]:
     """Play every job with ``model`` (eval mode); the episodes in job order. ``traces``: job index -> a list that
     gets each step's :class:`Step` (MiniGrid's drawing of the world before it) and a closing frame."""
     traces = traces or {}

@@ -319,8 +319,9 @@ class MiniGridPPOParams(Section):
 
 
 class MiniGridLearnParams(Section):
-    methods: list[Literal[MINIGRID_LEARNERS]] = Field(min_length=1, description="the learners: the decision transformers and "
-                                                            "the RNNs on each world's dataset, PPO in its worlds")
+    methods: list[Literal[MINIGRID_LEARNERS]] = Field(
+        min_length=1, description="the learners: the decision transformers and the RNNs on each world's dataset, "
+                                  "PPO in its worlds")
     seeds: list[int] = Field(min_length=1, description="training seeds, each evaluated on every test world")
     model: MiniGridModelParams = Field(default_factory=MiniGridModelParams)
     batch_size: PositiveInt = Field(1024, description="steps per gradient step (whole episodes)")

@@ -49,11 +49,10 @@ def reference_rows(env_id: str, seeds: Iterable[int], fail_probs: Iterable[float
 
 
 class StepsOnWorlds:
-    """A validation measure for a MiniGrid learner (a decision transformer, PPO's actor-critic; lower is better):
-    the mean steps of its episodes on ``jobs`` (validation worlds × fail_probs), an episode not done within
-    ``max_steps`` counting as ``max_steps`` — which is then the ``ceiling``, the value of a model that never reaches
-    its goal
-    (:class:`hnsdt.models.fit.Validation`). Plays greedily from fixed worlds and failure streams: it draws no
+    """A validation measure for a MiniGrid learner (any model :func:`hnsdt.agents.minigrid_play.play` acts with;
+    lower is better): the mean steps of its episodes on ``jobs`` (validation worlds × fail_probs), an episode not
+    done within ``max_steps`` counting as ``max_steps`` — which is then the ``ceiling``, the value of a model that
+    never reaches its goal (:class:`hnsdt.models.fit.Validation`). Plays greedily from fixed worlds and failure streams: it draws no
     random numbers of the training's."""
 
     name = "steps"

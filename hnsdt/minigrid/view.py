@@ -33,10 +33,9 @@ def gen_obs(env) -> dict:
     for _ in range((env.agent_dir + 1) % 4):  # Grid.rotate_left: new (j, n-1-i) = old (i, j)
         view = [[view[n - 1 - b][a] for b in range(n)] for a in range(n)]
     seen = _visible(view, n)
-    ax, ay = n // 2, n - 1
-    view[ax][ay] = env.carrying if env.carrying else None
-    flat = [(v.encode() if v is not None else _EMPTY) if seen[i][j] else _UNSEEN
-            for i in range(n) for j in range(n) for v in (view[i][j],)]
+    view[n // 2][n - 1] = env.carrying or None  # (the agent's cell shows what it carries)
+    flat = [_UNSEEN if not seen[i][j] else _EMPTY if view[i][j] is None else view[i][j].encode()
+            for i in range(n) for j in range(n)]
     image = np.array(flat, dtype=np.uint8).reshape(n, n, 3)
     return {"image": image, "direction": env.agent_dir, "mission": env.mission}
 
