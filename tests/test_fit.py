@@ -156,6 +156,19 @@ def test_continued_tasks_come_back_in_task_order(workers):
     assert out == ["a done", "b done", "c done", "d done", "e done"]
 
 
+@pytest.mark.parametrize("workers", [1, 2])
+def test_costlier_tasks_start_first_and_results_keep_task_order(tmp_path, workers):
+    """With ``cost``, the tasks start longest first (one worker: the log is the start order), equal costs in task
+    order; the results still come back in task order. Fails when the cost is ignored or the results follow it."""
+    log = tmp_path / "log"
+    tasks = [(label, str(log), False) for label in "abcde"]
+    cost = {"a": 1, "b": 3, "c": 2, "d": 3, "e": 0}
+    out = run_tasks(_logged, tasks, Compute(workers=workers), progress=False, cost=lambda t: cost[t[0]])
+    assert out == [f"{label} done" for label in "abcde"]
+    if workers == 1:
+        assert log.read_text().split() == ["b", "d", "c", "a", "e"]
+
+
 def test_one_worker_runs_its_tasks_through_the_pickles_of_a_pool():
     """What one process runs is what a pool's worker would be handed: a task that cannot cross to a worker (a
     lambda here) fails in this process too, and a result comes back as a copy, not the object the task made."""

@@ -270,19 +270,41 @@ def test_ppo_learns_doorkey_5x5_within_the_rl_zoo_budget():
     assert curve[-1]["frames"] >= 100_000 or usage["stopped_early"]
 
 
-def test_ppo_runs_are_the_same_bytes_for_the_same_seed_and_differ_for_another():
-    from hnsdt.baselines.minigrid_ppo import MiniGridPPOConfig, train_minigrid_ppo
+@pytest.mark.parametrize("code", ["policy_gradient", "q_learning", "option_critic"])
+def test_online_runs_are_the_same_bytes_for_the_same_seed_and_differ_for_another(code):
+    """PPO, DQN and option-critic on MiniGrid (hnsdt.compose.minigrid.ONLINE): a run is its seed's bytes, and
+    another seed's differ (each learns here: the replay learners start learning within the 1,024 frames)."""
+    from hnsdt.compose.minigrid import ONLINE
     from hnsdt.evaluation.minigrid import StepsOnWorlds
-    from hnsdt.models.minigrid_nets import MiniGridActorCriticConfig
 
+    network, trainer, train = ONLINE[code]
     env = "MiniGrid-DoorKey-5x5-v0"
     measure = StepsOnWorlds(env, [Job(50_000, 0.1, 0)], 20)
+    knobs = {k: v for k, v in dict(rollout_steps=128, learning_starts=256).items() if k in trainer.__dataclass_fields__}
     weights = []
     for seed in (0, 0, 1):
-        model, curve, _ = train_minigrid_ppo(env, [0, 1, 2], [0.0, 0.3], MiniGridActorCriticConfig(),
-                                             MiniGridPPOConfig(seed=seed, max_frames=1024, num_envs=4,
-                                                               rollout_steps=128, eval_every=512), measure,
-                                             progress=False)
+        model, curve, usage = train(env, [0, 1, 2], [0.0, 0.3], network(),
+                                    trainer(seed=seed, max_frames=1024, num_envs=4, eval_every=512, **knobs), measure,
+                                    progress=False)
         weights.append(torch.cat([p.flatten() for p in model.state_dict().values()]))
-        assert curve[-1]["frames"] == 1024
+        assert curve[-1]["frames"] == 1024 and usage["gradient_steps"] > 0
     assert torch.equal(weights[0], weights[1]) and not torch.equal(weights[0], weights[2])
+
+
+def test_option_critic_plays_each_episode_with_its_own_draws():
+    """Option-critic's options and actions are drawn in play (call-and-return): each episode from a generator of its
+    own, so an episode is the same played alone or beside others. Fails with one generator shared by the batch."""
+    from hnsdt.models.minigrid_nets import MiniGridOptionCritic, MiniGridOptionCriticConfig
+
+    torch.manual_seed(0)
+    model = MiniGridOptionCritic(MiniGridOptionCriticConfig()).eval()
+    env = "MiniGrid-DoorKey-5x5-v0"
+    jobs = [Job(10_000 + s, 0.0, k) for s in range(2) for k in range(2)]  # (no failures: only the draws differ)
+    together = {i: [] for i in range(len(jobs))}
+    play(model, env, jobs, max_steps=30, traces=together)
+    actions = {i: [step.action for step in trace] for i, trace in together.items()}
+    for i in (1, 2):
+        alone = {0: []}
+        play(model, env, [jobs[i]], max_steps=30, traces=alone)
+        assert [step.action for step in alone[0]] == actions[i]
+    assert actions[0] != actions[1]  # (the same world twice: another episode's own draws)

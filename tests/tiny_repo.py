@@ -13,7 +13,7 @@ from pathlib import Path
 
 import yaml
 
-from hnsdt.core.methods import LEARNED, METHODS
+from hnsdt.core.methods import LEARNED, METHODS, MINIGRID_LEARNERS, ONLINE_BASELINES
 
 REPO = Path(__file__).resolve().parent.parent
 BIN = Path(sys.executable).parent
@@ -81,7 +81,11 @@ def tiny_params(path: Path) -> None:
                               fail_probs=[0.2], episodes=1)
     params["minigrid"]["collect"].update(train_seeds={"first": 0, "count": 2})
     params["minigrid"]["learn"].update(seeds=[0], max_epochs=1, validation_seeds={"first": 50000, "count": 1},
-                                       ppo=dict(params["minigrid"]["learn"]["ppo"], max_frames=2048, eval_every=2048),
+                                       methods=list(MINIGRID_LEARNERS),  # (every learner, in the default or not)
+                                       **{name: dict(params["minigrid"]["learn"][name], max_frames=2048, eval_every=2048,
+                                                     **({"learning_starts": 512} if "learning_starts" in
+                                                        params["minigrid"]["learn"][name] else {}))
+                                          for name in ONLINE_BASELINES},
                                        validation_max_steps=20, model=dict(params["minigrid"]["learn"]["model"],
                                                                            n_layers=1, d_model=32))
     first = list(params.get("unseen_experiments", {}))[:1]  # one further experiment runs its stage kind

@@ -6,8 +6,10 @@ HNSDT: at every step the planner's operator at the head of its plan (the symboli
 when the next operator can no longer be done) becomes the step's sub-goal token, and the transformer picks the
 action — the hand-written controllers never act. The pure DT reads a return-to-go instead (the target return,
 less what the episode has earned). The recurrent controllers (the LSTM, the GRU) carry their recurrent state
-through the episode, and the hierarchical one picks its own sub-goal. The actor-critic reads the current step
-alone. All act greedily (the most likely action).
+through the episode, and the hierarchical one picks its own sub-goal. The online learners' networks read the current
+step alone: PPO's actor-critic and DQN act greedily (the most likely action, the highest value), as do the others;
+option-critic executes its options call-and-return as it trained (greedy options, actions and terminations drawn
+from π_ω and β_ω by a generator of the episode's own: the world's seed and failure stream).
 
 Many episodes are played in lockstep (one row each of the transformer's key/value cache), so that each step is one
 forward pass for all of them; each episode ends when MiniGrid ends it (success, or its own step limit) or at
@@ -25,7 +27,10 @@ from hnsdt.minigrid.collect import state_vector, subgoal_of
 from hnsdt.minigrid.controllers import SymbolicAgent
 from hnsdt.minigrid.live import Episode, GaveUp, Step, carried_name, close_trace, make_env, read_world, snapshot
 from hnsdt.minigrid.operators import PlanState
-from hnsdt.models.minigrid_nets import MiniGridActorCritic, MiniGridDT, MiniGridRecurrent, step_states
+from hnsdt.baselines.online import sample_categorical
+from hnsdt.baselines.options import choose_options
+from hnsdt.models.minigrid_nets import (MiniGridActorCritic, MiniGridDT, MiniGridOptionCritic, MiniGridQNetwork,
+                                        MiniGridRecurrent, step_states)
 
 
 @dataclass(frozen=True)
@@ -113,7 +118,44 @@ class _ActorCritic:
         return logits.argmax(-1).cpu().numpy()
 
 
-def play(model: MiniGridDT | MiniGridRecurrent | MiniGridActorCritic, env_id: str, jobs: list[Job],
+class _QGreedy:
+    """DQN's acting: the action of highest value in the current step."""
+
+    def __init__(self, model: MiniGridQNetwork):
+        self.model = model
+
+    def actions(self, rows, states, kinds, targets, games) -> np.ndarray:
+        with torch.no_grad():
+            return self.model(torch.as_tensor(states)).argmax(-1).numpy()
+
+
+class _Options:
+    """Option-critic's call-and-return execution: each episode's option runs until its termination draw (β_ω of
+    the state reached) ends it, the next one greedy in Q_Ω; actions drawn from π_ω. Each episode draws from its
+    own generator (its world's seed and failure stream), so that an episode is the same whichever play it is in."""
+
+    def __init__(self, model: MiniGridOptionCritic, jobs: list[Job]):
+        self.model = model
+        self.rngs = [np.random.default_rng([job.seed, job.failure_seed]) for job in jobs]
+        self.option = np.zeros(len(jobs), np.int64)
+        self.started = np.zeros(len(jobs), bool)
+
+    def actions(self, rows, states, kinds, targets, games) -> np.ndarray:
+        with torch.no_grad():
+            q, beta, logits = self.model(torch.as_tensor(states))
+        out = np.zeros(len(rows), np.int64)
+        for j, i in enumerate(rows):
+            rng = self.rngs[i]
+            # an option that has run a step ends with probability β_ω(s) in the state it reached
+            if not self.started[i] or rng.random() < float(beta[j, self.option[i]]):
+                self.option[i] = choose_options(q[j:j + 1], 0.0, rng)[0]
+                self.started[i] = True
+            out[j] = sample_categorical(logits[j:j + 1, self.option[i]], rng)[0]
+        return out
+
+
+def play(model: MiniGridDT | MiniGridRecurrent | MiniGridActorCritic | MiniGridQNetwork | MiniGridOptionCritic,
+         env_id: str, jobs: list[Job],
          target_return: float = 1.0, max_steps: int = 0, traces: dict[int, list[Step]] | None = None) -> list[Episode]:
     """Play every job with ``model`` (eval mode); the episodes in job order. ``traces``: job index -> a list that
     gets each step's :class:`Step` (MiniGrid's drawing of the world before it) and a closing frame."""
@@ -122,7 +164,9 @@ def play(model: MiniGridDT | MiniGridRecurrent | MiniGridActorCritic, env_id: st
     games = [_Game(env_id, job, subgoals, i in traces) for i, job in enumerate(jobs)]
     done: list[Episode | None] = [None] * len(games)
     actor = (_Transformer(model, len(games), target_return) if isinstance(model, MiniGridDT)
-             else _Recurrent(model, len(games)) if isinstance(model, MiniGridRecurrent) else _ActorCritic(model))
+             else _Recurrent(model, len(games)) if isinstance(model, MiniGridRecurrent)
+             else _QGreedy(model) if isinstance(model, MiniGridQNetwork)
+             else _Options(model, jobs) if isinstance(model, MiniGridOptionCritic) else _ActorCritic(model))
     alive = list(range(len(games)))
     try:
         while alive:

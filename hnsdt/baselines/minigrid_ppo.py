@@ -23,8 +23,8 @@ from tqdm import tqdm
 
 from hnsdt.baselines.online import Plateau, sample_categorical
 from hnsdt.baselines.ppo import advantages
-from hnsdt.minigrid.live import make_env
-from hnsdt.models.minigrid_nets import MiniGridActorCritic, MiniGridActorCriticConfig, step_states
+from hnsdt.baselines.minigrid_copies import TrainingCopies
+from hnsdt.models.minigrid_nets import MiniGridActorCritic, MiniGridActorCriticConfig
 from hnsdt.models.optim import Adam
 
 
@@ -48,36 +48,6 @@ class MiniGridPPOConfig:
     patience: int = 4  # measurements without a better one before stopping
 
 
-class _Copies:
-    """``num_envs`` MiniGrid envs, each reset onto a training world drawn by ``rng`` when its episode ends."""
-
-    def __init__(self, env_id: str, seeds: list[int], fail_probs: list[float], n: int, rng: np.random.Generator):
-        self.seeds, self.rng = seeds, rng
-        self.envs = [make_env(env_id, fail_probs[i % len(fail_probs)]) for i in range(n)]
-        self.episodes = 0
-        self.obs = [None] * n
-        for i in range(n):
-            self.reset(i)
-
-    def reset(self, i: int) -> None:
-        seed = int(self.rng.choice(self.seeds))
-        self.obs[i], _ = self.envs[i].reset(seed=seed, options={"failure_seed": self.episodes})
-        self.episodes += 1
-
-    def states(self) -> np.ndarray:
-        """Every copy's state vector (:func:`step_states`)."""
-        return np.stack([self.state(i, self.obs[i]) for i in range(len(self.envs))])
-
-    def state(self, i: int, obs) -> np.ndarray:
-        """What the actor-critic reads of an observation, as a state vector: the direction and the view (the
-        cell and the carried object, which it never reads, left 0: the run need not read the world's state)."""
-        return step_states([0, 0, int(obs["direction"]), 0, 0], obs["image"])
-
-    def close(self) -> None:
-        for env in self.envs:
-            env.close()
-
-
 def train_minigrid_ppo(env_id: str, train_seeds: list[int], fail_probs: list[float], net_cfg: MiniGridActorCriticConfig,
                        cfg: MiniGridPPOConfig, measure, progress: bool = True, desc: str = "train"):
     """Train to the plateau of ``measure`` (lower is better, with a ``ceiling``); returns ``(model in eval mode,
@@ -89,7 +59,7 @@ def train_minigrid_ppo(env_id: str, train_seeds: list[int], fail_probs: list[flo
     opt = Adam(model.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
     plateau = Plateau(cfg.patience, float(getattr(measure, "floor", float("-inf"))),
                       float(getattr(measure, "ceiling", float("inf"))))
-    copies = _Copies(env_id, list(train_seeds), list(fail_probs), cfg.num_envs, rng)
+    copies = TrainingCopies(env_id, list(train_seeds), list(fail_probs), cfg.num_envs, rng)
     n, T = cfg.num_envs, cfg.rollout_steps
     frames, updates, next_eval, curve, finished = 0, 0, cfg.eval_every, [], []
     states = copies.states()
@@ -105,23 +75,14 @@ def train_minigrid_ppo(env_id: str, train_seeds: list[int], fail_probs: list[flo
                 actions = sample_categorical(logits, rng)
                 buf_s[t], buf_a[t], buf_v[t] = states, actions, value.numpy()
                 buf_logp[t] = F.log_softmax(logits, -1).gather(1, torch.from_numpy(actions)[:, None])[:, 0].numpy()
-                cut = []
-                for i, a in enumerate(actions):
-                    obs, reward, terminated, truncated, _ = copies.envs[i].step(int(a))
-                    buf_r[t, i] = reward
-                    if terminated or truncated:
-                        buf_d[t, i] = 1.0
-                        finished.append(float(reward))
-                        if truncated and not terminated:  # (not terminal: bootstrap from where it stopped)
-                            cut.append((i, copies.state(i, obs)))
-                        copies.reset(i)
-                    else:
-                        copies.obs[i] = obs
-                if cut:
+                reached, rewards, terminated, truncated = copies.step(actions)
+                buf_r[t], buf_d[t] = rewards, terminated | truncated
+                finished += rewards[terminated | truncated].tolist()
+                cut = np.flatnonzero(truncated & ~terminated)  # (not terminal: bootstrap from where it stopped)
+                if len(cut):
                     with torch.no_grad():
-                        _, v = model(torch.from_numpy(np.stack([s for _, s in cut])))
-                    for (i, _), value_cut in zip(cut, v.numpy()):
-                        buf_r[t, i] += cfg.gamma * value_cut
+                        _, v = model(torch.from_numpy(reached[cut]))
+                    buf_r[t, cut] += cfg.gamma * v.numpy()
                 states = copies.states()
             with torch.no_grad():
                 _, next_value = model(torch.from_numpy(states))

@@ -1,6 +1,6 @@
 """The learners on MiniGrid's own worlds, one run per method and training seed: the decision transformers and the
-RNN baselines trained on the world's dataset (:mod:`hnsdt.data.minigrid_dataset`), PPO in its training worlds,
-each to the plateau of its steps on validation worlds; then every test world and fail_prob played
+RNN baselines trained on the world's dataset (:mod:`hnsdt.data.minigrid_dataset`), the online learners (PPO, DQN,
+option-critic: :data:`ONLINE`) in its training worlds, each to the plateau of its steps on validation worlds; then every test world and fail_prob played
 (:func:`hnsdt.agents.minigrid_play.play`).
 
 A run is a frozen :class:`LearnRun` (the dataset by path and md5, the knobs, the worlds) handed to :func:`learn` on
@@ -14,6 +14,8 @@ from dataclasses import asdict, dataclass
 from functools import lru_cache
 
 from hnsdt.agents.minigrid_play import Job, play
+from hnsdt.baselines.minigrid_dqn import MiniGridDQNConfig, train_minigrid_dqn
+from hnsdt.baselines.minigrid_options import MiniGridOptionsConfig, train_minigrid_options
 from hnsdt.baselines.minigrid_ppo import MiniGridPPOConfig, train_minigrid_ppo
 from hnsdt.compose.params import Params
 from hnsdt.baselines.recurrent import RecurrentTrainConfig, train_recurrent
@@ -21,7 +23,8 @@ from hnsdt.core.methods import OFFLINE_BASELINES, OUR_DTS, method
 from hnsdt.data.format import DatasetError
 from hnsdt.data.minigrid_dataset import check_minigrid_dataset, load_minigrid_frames
 from hnsdt.evaluation.minigrid import StepsOnWorlds
-from hnsdt.models.minigrid_nets import (MiniGridActorCriticConfig, MiniGridDT, MiniGridDTConfig, MiniGridRecurrent,
+from hnsdt.models.minigrid_nets import (MiniGridActorCriticConfig, MiniGridDT, MiniGridDTConfig,
+                                        MiniGridOptionCriticConfig, MiniGridQNetworkConfig, MiniGridRecurrent,
                                         MiniGridRecurrentConfig)
 from hnsdt.models.train import TrainConfig, train_decision_transformer
 
@@ -33,14 +36,14 @@ class LearnRun:
     data_md5: str  # ... whose bytes the run was planned on
     method: str  # a MiniGrid learner of the registry (hnsdt.core.methods.MINIGRID_LEARNERS)
     seed: int
-    model: tuple  # the network's config fields (MiniGridDTConfig's, MiniGridRecurrentConfig's,
-    #               MiniGridActorCriticConfig's) as (name, value)
-    train: tuple  # the trainer's (TrainConfig's, RecurrentTrainConfig's, MiniGridPPOConfig's)
+    model: tuple  # the network's config fields (MiniGridDTConfig's, MiniGridRecurrentConfig's, or an online
+    #               learner's: ONLINE's) as (name, value)
+    train: tuple  # the trainer's (TrainConfig's, RecurrentTrainConfig's, ONLINE's)
     validation: tuple[Job, ...]
     validation_max_steps: int
     test: tuple[Job, ...]
     target_return: float
-    train_seeds: tuple[int, ...]  # PPO's worlds (the dataset's)
+    train_seeds: tuple[int, ...]  # the online learners' worlds (the dataset's)
     fail_probs: tuple[float, ...]
 
 
@@ -62,8 +65,12 @@ def learn_runs(params: Params, env: str, dataset: str) -> list[LearnRun]:
                                 device="cpu", patience=learn.patience, log_every=10)
         elif name in OFFLINE_BASELINES:  # the network and its batches as in the paper's worlds (baselines.<name>)
             model, train = _recurrent_settings(params, name, learn)
-        else:
-            model, train = MiniGridActorCriticConfig(), MiniGridPPOConfig(**learn.ppo.model_dump())
+        else:  # an online learner: its knobs in minigrid.learn.<name> (the network's among them: options')
+            network, trainer, _ = ONLINE[method(name).code]
+            knobs = getattr(learn, name).model_dump()
+            net_fields = {f for f in network.__dataclass_fields__ if f in knobs}
+            model = network(**{k: knobs.pop(k) for k in net_fields})
+            train = trainer(**knobs)
         for seed in learn.seeds:
             runs.append(LearnRun(section.envs[env].id, str(dataset), md5, name, int(seed),
                                  tuple(asdict(model).items()), tuple({**asdict(train), "seed": int(seed)}.items()),
@@ -71,6 +78,19 @@ def learn_runs(params: Params, env: str, dataset: str) -> list[LearnRun]:
                                  tuple(section.collect.train_seeds.seeds), tuple(section.fail_probs)))
     return runs
 
+
+def start_order(run: LearnRun) -> int:
+    """Which runs the stage starts first (:func:`hnsdt.core.compute.run_tasks`' ``cost``), longest first: the
+    online learners (every frame a step of MiniGrid, and a policy that never reaches the goal plays every test
+    episode to MiniGrid's step limit), then the RNNs, then the transformers (one run each of DoorKey-8x8 on the
+    Zen 4: 69, 28–62 and 16–30 s, ``benchmarks/minigrid_learn_runs.py``). Only the order runs start in."""
+    return 2 if method(run.method).training == "online" else 1 if run.method in OFFLINE_BASELINES else 0
+
+
+# The online learners by the registry's code: their network's config, their trainer's config and their training
+ONLINE = {"policy_gradient": (MiniGridActorCriticConfig, MiniGridPPOConfig, train_minigrid_ppo),
+          "q_learning": (MiniGridQNetworkConfig, MiniGridDQNConfig, train_minigrid_dqn),
+          "option_critic": (MiniGridOptionCriticConfig, MiniGridOptionsConfig, train_minigrid_options)}
 
 RECURRENT_KNOBS = ("n_layers", "hidden", "embed", "batch_size", "lr")  # read from baselines.<name>
 
@@ -101,9 +121,8 @@ def _frames(dataset: str, md5: str):
     return frames
 
 
-def learn(run: LearnRun) -> dict:
-    """Train ``run``'s model to its plateau on the validation worlds, then play the test worlds: ``{"state":
-    weights, "config", "curve", "usage", "episodes": [Episode per test job]}``."""
+def train(run: LearnRun) -> tuple:
+    """Train ``run``'s model to its plateau on the validation worlds: ``(model, config, curve, usage)``."""
     measure = StepsOnWorlds(run.env_id, list(run.validation), run.validation_max_steps, run.target_return)
     if run.method in OUR_DTS:
         cfg = MiniGridDTConfig(**dict(run.model))
@@ -115,9 +134,17 @@ def learn(run: LearnRun) -> dict:
         model, curve, usage = train_recurrent(_frames(run.dataset, run.data_md5), cfg, RecurrentTrainConfig(
             **dict(run.train)), progress=False, network=MiniGridRecurrent, measure=measure)
     else:
-        cfg = MiniGridActorCriticConfig(**dict(run.model))
-        model, curve, usage = train_minigrid_ppo(run.env_id, list(run.train_seeds), list(run.fail_probs), cfg,
-                                                 MiniGridPPOConfig(**dict(run.train)), measure, progress=False)
+        network, trainer, train_online = ONLINE[method(run.method).code]
+        cfg = network(**dict(run.model))
+        model, curve, usage = train_online(run.env_id, list(run.train_seeds), list(run.fail_probs), cfg,
+                                           trainer(**dict(run.train)), measure, progress=False)
+    return model, cfg, curve, usage
+
+
+def learn(run: LearnRun) -> dict:
+    """Train ``run``'s model (:func:`train`), then play the test worlds: ``{"state": weights, "config", "curve",
+    "usage", "episodes": [Episode per test job]}``."""
+    model, cfg, curve, usage = train(run)
     episodes = play(model, run.env_id, list(run.test), run.target_return)
     return {"network": type(model), "state": {k: v.detach().cpu().clone() for k, v in model.state_dict().items()},
             "config": cfg, "curve": curve, "usage": usage, "episodes": episodes}

@@ -318,10 +318,36 @@ class MiniGridPPOParams(Section):
     patience: PositiveInt = Field(4, description="measurements without fewer validation steps before stopping")
 
 
+class MiniGridDQNParams(Section):
+    max_frames: PositiveInt = Field(250_000, description="the cap on env steps; it stops at its plateau before")
+    num_envs: PositiveInt = Field(16, description="copies of the env stepped together")
+    lr: float = Field(2.5e-4, gt=0, description="Adam's learning rate")
+    buffer_size: PositiveInt = Field(10_000, description="replay capacity, in transitions")
+    batch_size: PositiveInt = Field(128, description="replayed transitions per gradient step")
+    learning_starts: PositiveInt = Field(10_000, description="frames of exploration before learning")
+    train_every: PositiveInt = Field(10, description="frames per gradient step")
+    target_period: PositiveInt = Field(50, description="gradient steps between target-network copies")
+    exploration_fraction: float = Field(0.5, gt=0, le=1, description="of max_frames, over which epsilon decays")
+    eval_every: PositiveInt = Field(50_000, description="frames between validation measurements")
+    patience: PositiveInt = Field(4, description="measurements without fewer validation steps before stopping")
+
+
+class MiniGridOptionsParams(Section):
+    max_frames: PositiveInt = Field(250_000, description="the cap on env steps; it stops at its plateau before")
+    num_envs: PositiveInt = Field(16, description="copies of the env stepped together")
+    lr: float = Field(5e-4, gt=0, description="Adam's learning rate")
+    n_options: PositiveInt = Field(8, description="the options")
+    termination_reg: float = Field(0.01, ge=0, description="the margin that keeps options from ending every step")
+    entropy_reg: float = Field(0.01, ge=0, description="the intra-option policies' entropy bonus")
+    exploration_fraction: float = Field(0.5, gt=0, le=1, description="of max_frames, over which epsilon decays")
+    eval_every: PositiveInt = Field(50_000, description="frames between validation measurements")
+    patience: PositiveInt = Field(4, description="measurements without fewer validation steps before stopping")
+
+
 class MiniGridLearnParams(Section):
     methods: list[Literal[MINIGRID_LEARNERS]] = Field(
         min_length=1, description="the learners: the decision transformers and the RNNs on each world's dataset, "
-                                  "PPO in its worlds")
+                                  "the online learners (PPO, DQN, option-critic) in its worlds")
     seeds: list[int] = Field(min_length=1, description="training seeds, each evaluated on every test world")
     model: MiniGridModelParams = Field(default_factory=MiniGridModelParams)
     batch_size: PositiveInt = Field(1024, description="steps per gradient step (whole episodes)")
@@ -335,6 +361,10 @@ class MiniGridLearnParams(Section):
     target_return: float = Field(1.0, description="the pure DT's return-to-go at the start of an episode")
     ppo: MiniGridPPOParams = Field(default_factory=lambda: MiniGridPPOParams(),
                                    description="PPO's knobs (hnsdt.baselines.minigrid_ppo)")
+    dqn: MiniGridDQNParams = Field(default_factory=lambda: MiniGridDQNParams(),
+                                   description="DQN's knobs (hnsdt.baselines.minigrid_dqn)")
+    options: MiniGridOptionsParams = Field(default_factory=lambda: MiniGridOptionsParams(),
+                                           description="option-critic's knobs (hnsdt.baselines.minigrid_options)")
 
 
 class MiniGridParams(Section):

@@ -76,17 +76,20 @@ def _call_pickled(fn: Callable, threads: int, task: bytes) -> bytes:
 
 
 def run_tasks(fn: Callable, tasks: list, compute: Compute = Compute(), desc: str = "runs",
-              progress: bool = True, keep: Path | None = None) -> list:
+              progress: bool = True, keep: Path | None = None, cost: Callable[[Any], float] | None = None) -> list:
     """``[fn(task) for task in tasks]``, computed by ``compute``'s executor; results in task order. ``keep``: a
     folder where each task's result is kept as soon as it is finished (:class:`Kept`), so that a run killed
     part-way and started again computes only the tasks that had not finished; the caller removes it once the
-    results are written."""
+    results are written. ``cost``: a task's expected time (any unit); the tasks start longest first, so that
+    workers do not sit idle at the end behind one long task (only the order they start in: not the results)."""
     from tqdm import tqdm
 
     kept = Kept(keep, fn) if keep is not None else None
     paths = [kept.path(task) for task in tasks] if kept else [None] * len(tasks)  # (each task pickled once here)
     out = [kept.result(path) if kept else _MISSING for path in paths]
     todo = [i for i, result in enumerate(out) if result is _MISSING]
+    if cost is not None:
+        todo.sort(key=lambda i: -cost(tasks[i]))  # (stable: equal costs keep task order)
     if len(todo) < len(tasks):
         print(f"{desc}: {len(tasks) - len(todo)} of {len(tasks)} runs finished before this one was stopped; "
               f"taken from {keep}", flush=True)

@@ -65,9 +65,8 @@ ONLINE_BASELINES = tuple(m.name for m in METHODS.values() if m.stage == "train_o
 BASELINES = OFFLINE_BASELINES + ONLINE_BASELINES  # configured under `baselines.<name>`
 LEARNED = DT_METHODS + BASELINES
 OUR_DTS = tuple(m.name for m in METHODS.values() if m.stage == "train" and m.arm == "ours")
-# On MiniGrid's own worlds (hnsdt.compose.minigrid): our transformers, the RNN baselines and PPO
-MINIGRID_LEARNERS = (OUR_DTS + OFFLINE_BASELINES
-                     + tuple(m for m in ONLINE_BASELINES if METHODS[m].code == "policy_gradient"))
+# On MiniGrid's own worlds (hnsdt.compose.minigrid): our transformers, the RNN baselines and the online ones
+MINIGRID_LEARNERS = OUR_DTS + OFFLINE_BASELINES + ONLINE_BASELINES
 STAGES = {"train": DT_METHODS, "train_offline": OFFLINE_BASELINES, "train_online": ONLINE_BASELINES}
 
 

@@ -1,7 +1,8 @@
 """The networks on MiniGrid's own worlds (:mod:`hnsdt.minigrid`), reading what a MiniGrid agent sees and acting with
 MiniGrid's seven actions: the decision transformer of :mod:`hnsdt.models.dt` (episode formulation, one token per
 step; :class:`MiniGridDT`), the RNN baselines' controllers of :mod:`hnsdt.models.recurrent`
-(:class:`MiniGridRecurrent`) and PPO's actor-critic (:class:`MiniGridActorCritic`).
+(:class:`MiniGridRecurrent`), and the online learners' networks over the current step (:class:`ViewConv`: PPO's
+actor-critic, DQN's Q-network, option-critic's).
 
 A step's state vector (:func:`step_states`) is ``row, col, direction, carried type, carried colour`` and then
 MiniGrid's own observation ``image``, the 7 × 7 cells ahead of the agent (egocentric, each cell's object, colour
@@ -137,30 +138,90 @@ class MiniGridRecurrent(ViewStates, RecurrentPolicy, arch="minigrid_recurrent", 
     n_subgoals = N_KINDS
 
 
+class ViewConv:
+    """Reading the current step alone as MiniGrid's own starter code does (``rl-starter-files``' ACModel): three
+    2 × 2 convolutions with a max-pool over the 7 × 7 view's (object, colour, state) indices, plus the direction,
+    into 64 features. States are :func:`step_states` vectors, of which it reads the direction and the view (the
+    agent's cell, and what it carries but through the view, never). Shared by the online learners' networks."""
+
+    def build_view_conv(self) -> None:
+        self.image = nn.Sequential(nn.Conv2d(3, 16, 2), nn.ReLU(), nn.MaxPool2d(2), nn.Conv2d(16, 32, 2), nn.ReLU(),
+                                   nn.Conv2d(32, 64, 2), nn.ReLU(), nn.Flatten())
+        self.direction_emb = nn.Embedding(N_DIRECTIONS, 64)
+
+    def view_features(self, states: torch.Tensor) -> torch.Tensor:
+        """(N, 64) of (N, 152) state vectors."""
+        view = states[:, N_STATE:].unflatten(-1, (VIEW, VIEW, 3)).permute(0, 3, 2, 1).float()  # (N, 3, y, x)
+        return self.image(view) + self.direction_emb(states[:, 2])
+
+
+def _head(hidden: int, outputs: int) -> nn.Sequential:
+    return nn.Sequential(nn.Linear(64, hidden), nn.Tanh(), nn.Linear(hidden, outputs))
+
+
 @dataclass
 class MiniGridActorCriticConfig:
     hidden: int = 64  # the actor's and the critic's hidden layer
 
 
-class MiniGridActorCritic(Network, arch="minigrid_actor_critic", config=MiniGridActorCriticConfig):
-    """PPO's network on MiniGrid (the actor-critic of MiniGrid's own starter code, ``rl-starter-files``' ACModel):
-    three 2 × 2 convolutions with a max-pool over the 7 × 7 view's (object, colour, state) indices, plus the
-    direction, into an actor (logits over the 7 actions) and a critic (the state's value). It reads the current
-    step alone (no memory); states are :func:`step_states` vectors, of which it reads the direction and the view
-    (the agent's cell, and what it carries but through the view, never)."""
+class MiniGridActorCritic(ViewConv, Network, arch="minigrid_actor_critic", config=MiniGridActorCriticConfig):
+    """PPO's network on MiniGrid (the actor-critic of ``rl-starter-files``): :class:`ViewConv` into an actor
+    (logits over the 7 actions) and a critic (the state's value). No memory."""
 
     n_actions = N_ACTIONS
 
     def __init__(self, cfg: MiniGridActorCriticConfig):
         super().__init__(cfg)
-        self.image = nn.Sequential(nn.Conv2d(3, 16, 2), nn.ReLU(), nn.MaxPool2d(2), nn.Conv2d(16, 32, 2), nn.ReLU(),
-                                   nn.Conv2d(32, 64, 2), nn.ReLU(), nn.Flatten())
-        self.direction_emb = nn.Embedding(N_DIRECTIONS, 64)
-        self.actor = nn.Sequential(nn.Linear(64, cfg.hidden), nn.Tanh(), nn.Linear(cfg.hidden, N_ACTIONS))
-        self.critic = nn.Sequential(nn.Linear(64, cfg.hidden), nn.Tanh(), nn.Linear(cfg.hidden, 1))
+        self.build_view_conv()
+        self.actor, self.critic = _head(cfg.hidden, N_ACTIONS), _head(cfg.hidden, 1)
 
     def forward(self, states: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(logits (N, 7), values (N,)) of (N, 152) state vectors."""
-        view = states[:, N_STATE:].unflatten(-1, (VIEW, VIEW, 3)).permute(0, 3, 2, 1).float()  # (N, 3, y, x)
-        x = self.image(view) + self.direction_emb(states[:, 2])
+        x = self.view_features(states)
         return self.actor(x), self.critic(x)[:, 0]
+
+
+@dataclass
+class MiniGridQNetworkConfig:
+    hidden: int = 64  # the Q head's hidden layer
+
+
+class MiniGridQNetwork(ViewConv, Network, arch="minigrid_q_network", config=MiniGridQNetworkConfig):
+    """DQN's network on MiniGrid: :class:`ViewConv` into the 7 actions' values. No memory."""
+
+    n_actions = N_ACTIONS
+
+    def __init__(self, cfg: MiniGridQNetworkConfig):
+        super().__init__(cfg)
+        self.build_view_conv()
+        self.q = _head(cfg.hidden, N_ACTIONS)
+
+    def forward(self, states: torch.Tensor) -> torch.Tensor:
+        """Q-values (N, 7) of (N, 152) state vectors."""
+        return self.q(self.view_features(states))
+
+
+@dataclass
+class MiniGridOptionCriticConfig:
+    n_options: int = 8  # as on our maps (hnsdt.models.qnetwork.OptionCriticConfig)
+    hidden: int = 64  # each head's hidden layer
+
+
+class MiniGridOptionCritic(ViewConv, Network, arch="minigrid_option_critic", config=MiniGridOptionCriticConfig):
+    """Option-critic's network on MiniGrid (Bacon et al., 2017): :class:`ViewConv` into Q_Ω(s, ω), the
+    termination probabilities β_ω(s) and the intra-option policies π_ω(a | s) of every option. No memory."""
+
+    n_actions = N_ACTIONS
+
+    def __init__(self, cfg: MiniGridOptionCriticConfig):
+        super().__init__(cfg)
+        self.build_view_conv()
+        k = cfg.n_options
+        self.q, self.termination, self.policy = _head(cfg.hidden, k), _head(cfg.hidden, k), _head(cfg.hidden,
+                                                                                                  k * N_ACTIONS)
+
+    def forward(self, states: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Q_Ω (N, K), β (N, K) in (0, 1), policy logits (N, K, 7)."""
+        x = self.view_features(states)
+        return self.q(x), torch.sigmoid(self.termination(x)), self.policy(x).unflatten(-1, (self.cfg.n_options,
+                                                                                              N_ACTIONS))

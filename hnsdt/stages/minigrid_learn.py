@@ -19,7 +19,7 @@ def minigrid_learn(params: Params, env: str, dataset: Path, out: Path, recorded:
     ``provenance.json`` (PPO's curve: a row per iteration, its validation steps every ``eval_every`` frames);
     ``recorded``: one rerun and one MCAP recording per method and fail_prob (training seed
     0, the first test world; their own output, as rerun's bytes vary from run to run)."""
-    from hnsdt.compose.minigrid import learn, learn_runs
+    from hnsdt.compose.minigrid import learn, learn_runs, start_order
     from hnsdt.core.compute import run_tasks
     from hnsdt.core.fileio import atomic_dir, finished_tasks, write_folder
     from hnsdt.evaluation.minigrid import (LEARNED_COLUMNS, ROW_COLUMNS, learned_recordings, played_rows,
@@ -32,7 +32,7 @@ def minigrid_learn(params: Params, env: str, dataset: Path, out: Path, recorded:
     runs = learn_runs(params, env, str(dataset))
     with finished_tasks(out) as keep:  # (runs finished before a kill are not run again)
         results = run_tasks(learn, runs, compute or compute_settings(params), desc=f"learn {env}", progress=progress,
-                            keep=keep)
+                            keep=keep, cost=start_order)
         rows, models = [], {}
         with atomic_dir(out) as work:
             (work / "curves").mkdir(parents=True)

@@ -1,0 +1,57 @@
+"""What the online learners on MiniGrid's own worlds train in: copies of the env, each reset onto a training world
+(MiniGrid's reset seed) drawn by the run's generator, copy i under ``fail_probs[i % len]`` — so that an online learner
+meets the worlds and failures the offline learners' datasets hold."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hnsdt.minigrid.live import make_env
+from hnsdt.models.minigrid_nets import step_states
+
+
+class TrainingCopies:
+    """``num_envs`` MiniGrid envs, each reset onto a training world drawn by ``rng`` when its episode ends."""
+
+    def __init__(self, env_id: str, seeds: list[int], fail_probs: list[float], n: int, rng: np.random.Generator):
+        self.seeds, self.rng = seeds, rng
+        self.envs = [make_env(env_id, fail_probs[i % len(fail_probs)]) for i in range(n)]
+        self.episodes = 0
+        self.obs = [None] * n
+        for i in range(n):
+            self.reset(i)
+
+    def reset(self, i: int) -> None:
+        seed = int(self.rng.choice(self.seeds))
+        self.obs[i], _ = self.envs[i].reset(seed=seed, options={"failure_seed": self.episodes})
+        self.episodes += 1
+
+    def step(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Step copy i with ``actions[i]``; a copy whose episode ended is reset at once (copy by copy, in order).
+        Returns per copy the state vector it reached (before any reset), its reward, whether the episode ended
+        terminated (a goal reached, or lost) and whether MiniGrid's step limit cut it."""
+        n = len(self.envs)
+        reached, rewards = [], np.zeros(n)
+        terminated, truncated = np.zeros(n, bool), np.zeros(n, bool)
+        for i, a in enumerate(actions):
+            obs, rewards[i], terminated[i], truncated[i], _ = self.envs[i].step(int(a))
+            reached.append(self.state(i, obs))
+            if terminated[i] or truncated[i]:
+                self.reset(i)
+            else:
+                self.obs[i] = obs
+        return np.stack(reached), rewards, terminated, truncated
+
+    def states(self) -> np.ndarray:
+        """Every copy's state vector (:func:`step_states`)."""
+        return np.stack([self.state(i, self.obs[i]) for i in range(len(self.envs))])
+
+    def state(self, i: int, obs) -> np.ndarray:
+        """What the online learners' networks read of an observation (:class:`hnsdt.models.minigrid_nets.ViewConv`),
+        as a state vector: the direction and the view (the cell and the carried object, which they never read,
+        left 0: the run need not read the world's state)."""
+        return step_states([0, 0, int(obs["direction"]), 0, 0], obs["image"])
+
+    def close(self) -> None:
+        for env in self.envs:
+            env.close()
