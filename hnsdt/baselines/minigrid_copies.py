@@ -18,12 +18,14 @@ class TrainingCopies:
         self.envs = [make_env(env_id, fail_probs[i % len(fail_probs)]) for i in range(n)]
         self.episodes = 0
         self.obs = [None] * n
+        self.current: list = [None] * n  # each copy's state vector now (computed once a step)
         for i in range(n):
             self.reset(i)
 
     def reset(self, i: int) -> None:
         seed = int(self.rng.choice(self.seeds))
         self.obs[i], _ = self.envs[i].reset(seed=seed, options={"failure_seed": self.episodes})
+        self.current[i] = self.state(i, self.obs[i])
         self.episodes += 1
 
     def step(self, actions) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -39,12 +41,12 @@ class TrainingCopies:
             if terminated[i] or truncated[i]:
                 self.reset(i)
             else:
-                self.obs[i] = obs
+                self.obs[i], self.current[i] = obs, reached[-1]
         return np.stack(reached), rewards, terminated, truncated
 
     def states(self) -> np.ndarray:
-        """Every copy's state vector (:func:`step_states`)."""
-        return np.stack([self.state(i, self.obs[i]) for i in range(len(self.envs))])
+        """Every copy's state vector now (:func:`step_states`)."""
+        return np.stack(self.current)
 
     def state(self, i: int, obs) -> np.ndarray:
         """What the online learners' networks read of an observation (:class:`hnsdt.models.minigrid_nets.ViewConv`),
