@@ -82,8 +82,8 @@ def learn_runs(params: Params, env: str, dataset: str) -> list[LearnRun]:
 def start_order(run: LearnRun) -> int:
     """Which runs the stage starts first (:func:`hnsdt.core.compute.run_tasks`' ``cost``), longest first: the
     online learners (every frame a step of MiniGrid, and a policy that never reaches the goal plays every test
-    episode to MiniGrid's step limit), then the RNNs, then the transformers (one run each of DoorKey-8x8 on the
-    Zen 4: 69, 28–62 and 16–30 s, ``benchmarks/minigrid_learn_runs.py``). Only the order runs start in."""
+    episode to MiniGrid's step limit), then the RNNs, then the transformers (one run each on the Zen 4: 69–225,
+    28–62 and 16–30 s, ``benchmarks/minigrid_learn_runs.py``). Only the order runs start in."""
     return 2 if method(run.method).training == "online" else 1 if run.method in OFFLINE_BASELINES else 0
 
 
