@@ -8,8 +8,8 @@ the greedy policy is measured on the validation worlds (:class:`hnsdt.evaluation
 stops at that measure's plateau (:class:`hnsdt.baselines.online.Plateau`: ``patience`` measurements without a better
 one, not while ε still decays, never while no measurement has reached a goal) or at ``max_frames``, and keeps the
 best measurement's weights. Departures from CleanRL, named: copies stepped together (``num_envs``, CleanRL's
-default is 1) and Adam's default ε; an episode cut off by MiniGrid's step limit is not terminal (its target
-bootstraps from the state it reached), as in our other learners.
+default is 1), and an episode cut off by MiniGrid's step limit is not terminal (its target bootstraps from the
+state it reached), as in our other learners.
 """
 
 from __future__ import annotations
