@@ -1,11 +1,14 @@
-"""What the online learners on MiniGrid's own worlds train in: copies of the env, each reset onto a training world
-(MiniGrid's reset seed) drawn by the run's generator, copy i under ``fail_probs[i % len]`` — so that an online learner
-meets the worlds and failures the offline learners' datasets hold."""
+"""What the online learners on MiniGrid's own worlds (PPO, DQN, option-critic) share: the copies of the env they
+train in, each reset onto a training world (MiniGrid's reset seed) drawn by the run's generator, copy i under
+``fail_probs[i % len]`` — so that an online learner meets the worlds and failures the offline learners' datasets
+hold —, and their training to the plateau of a validation measure."""
 
 from __future__ import annotations
 
 import numpy as np
+import torch.nn as nn
 
+from hnsdt.baselines.online import Plateau
 from hnsdt.minigrid.live import make_env
 from hnsdt.models.minigrid_nets import step_states
 
@@ -54,6 +57,41 @@ class TrainingCopies:
         left 0: the run need not read the world's state)."""
         return step_states([0, 0, int(obs["direction"]), 0, 0], obs["image"])
 
+    def used(self, frames: int, gradient_steps: int) -> dict:
+        """What a run has used: its env steps, the episodes its copies finished, its gradient steps."""
+        return {"frames": frames, "episodes": self.episodes - len(self.envs), "gradient_steps": gradient_steps}
+
     def close(self) -> None:
         for env in self.envs:
             env.close()
+
+
+class Validated:
+    """A run's measurements on the validation worlds (``measure``: lower is better, with a ``floor`` and a
+    ``ceiling``) and its stop at their plateau (:class:`hnsdt.baselines.online.Plateau`: ``patience`` measurements
+    without a better one, never while none has reached a goal)."""
+
+    def __init__(self, measure, patience: int):
+        self.measure = measure
+        self.plateau = Plateau(patience, float(getattr(measure, "floor", float("-inf"))),
+                               float(getattr(measure, "ceiling", float("inf"))))
+
+    @property
+    def stopped(self) -> bool:
+        return self.plateau.stopped is not None
+
+    def check(self, net: nn.Module, frames: int, used: dict, may_stop: bool = True) -> float:
+        """Measure ``net`` greedily now (in eval mode, then back to training) and update the plateau."""
+        net.eval()
+        value = float(self.measure(net))
+        net.train()
+        self.plateau.update(frames, value, net, used, may_stop)
+        return value
+
+    def finish(self, net: nn.Module, used: dict) -> dict:
+        """Put the best measurement's weights into ``net`` (eval mode); what the run used when it stopped (``used``
+        when it never did) and its measurements."""
+        if self.plateau.best is not None:
+            net.load_state_dict(self.plateau.best[3])
+        net.eval()
+        return {**(self.plateau.stopped or used), **self.plateau.record()}

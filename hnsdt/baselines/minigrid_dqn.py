@@ -22,8 +22,8 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from hnsdt.baselines.minigrid_copies import TrainingCopies
-from hnsdt.baselines.online import Plateau, ReplayBuffer, linear_schedule
+from hnsdt.baselines.minigrid_copies import TrainingCopies, Validated
+from hnsdt.baselines.online import ReplayBuffer, linear_schedule
 from hnsdt.models.minigrid_nets import N_ACTIONS, MiniGridQNetwork, MiniGridQNetworkConfig
 from hnsdt.models.optim import Adam
 
@@ -57,8 +57,7 @@ def train_minigrid_dqn(env_id: str, train_seeds: list[int], fail_probs: list[flo
     q = MiniGridQNetwork(net_cfg)
     target = copy.deepcopy(q)
     opt = Adam(q.parameters(), lr=cfg.lr)
-    plateau = Plateau(cfg.patience, float(getattr(measure, "floor", float("-inf"))),
-                      float(getattr(measure, "ceiling", float("inf"))))
+    validated = Validated(measure, cfg.patience)
     copies = TrainingCopies(env_id, list(train_seeds), list(fail_probs), cfg.num_envs, rng)
     n = cfg.num_envs
     states = copies.states()
@@ -67,7 +66,7 @@ def train_minigrid_dqn(env_id: str, train_seeds: list[int], fail_probs: list[flo
     frames, updates, due, next_eval, curve, finished, losses = 0, 0, 0.0, cfg.eval_every, [], [], []
     bar = tqdm(total=cfg.max_frames, desc=desc, unit="frame", disable=not progress)
     try:
-        while frames < cfg.max_frames and plateau.stopped is None:
+        while frames < cfg.max_frames and not validated.stopped:
             # 1. act ε-greedily in every copy; store the transitions (a cut episode is not terminal)
             epsilon = linear_schedule(cfg.epsilon_start, cfg.epsilon_end, explore, frames)
             with torch.no_grad():
@@ -100,20 +99,13 @@ def train_minigrid_dqn(env_id: str, train_seeds: list[int], fail_probs: list[flo
             # 3. every `eval_every` frames: a curve row, and the greedy policy's steps on the validation worlds
             if frames >= next_eval or frames >= cfg.max_frames:
                 next_eval += cfg.eval_every
-                used = {"frames": frames, "episodes": copies.episodes - n, "gradient_steps": updates}
+                used = copies.used(frames, updates)
                 curve.append({**used, "epsilon": epsilon, "return": float(np.mean(finished)) if finished else 0.0,
                               "loss": float(np.mean(losses)) if losses else None})
                 finished, losses = [], []
-                q.eval()
-                value = float(measure(q))
-                q.train()
-                plateau.update(frames, value, q, used, may_stop=frames >= explore)
+                value = validated.check(q, frames, used, may_stop=frames >= explore)
                 bar.set_postfix(steps=f"{value:.1f}", eps=f"{epsilon:.2f}")
     finally:
         bar.close()
         copies.close()
-    if plateau.best is not None:
-        q.load_state_dict(plateau.best[3])
-    used = plateau.stopped or {"frames": frames, "episodes": copies.episodes - n, "gradient_steps": updates}
-    q.eval()
-    return q, curve, {**used, **plateau.record()}
+    return q, curve, validated.finish(q, copies.used(frames, updates))

@@ -29,8 +29,8 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from hnsdt.baselines.minigrid_copies import TrainingCopies
-from hnsdt.baselines.online import Plateau, ReplayBuffer, linear_schedule, sample_categorical
+from hnsdt.baselines.minigrid_copies import TrainingCopies, Validated
+from hnsdt.baselines.online import ReplayBuffer, linear_schedule, sample_categorical
 from hnsdt.baselines.options import choose_options
 from hnsdt.models.minigrid_nets import MiniGridOptionCritic, MiniGridOptionCriticConfig
 from hnsdt.models.optim import Adam
@@ -68,8 +68,7 @@ def train_minigrid_options(env_id: str, train_seeds: list[int], fail_probs: list
     net = MiniGridOptionCritic(net_cfg)
     target = copy.deepcopy(net)
     opt = Adam(net.parameters(), lr=cfg.lr)
-    plateau = Plateau(cfg.patience, float(getattr(measure, "floor", float("-inf"))),
-                      float(getattr(measure, "ceiling", float("inf"))))
+    validated = Validated(measure, cfg.patience)
     copies = TrainingCopies(env_id, list(train_seeds), list(fail_probs), cfg.num_envs, rng)
     n, rows = cfg.num_envs, torch.arange(cfg.num_envs)
     states = copies.states()
@@ -79,7 +78,7 @@ def train_minigrid_options(env_id: str, train_seeds: list[int], fail_probs: list
     frames, updates, next_eval, curve, finished, option_ends, last_row = 0, 0, cfg.eval_every, [], [], 0, 0
     bar = tqdm(total=cfg.max_frames, desc=desc, unit="frame", disable=not progress)
     try:
-        while frames < cfg.max_frames and plateau.stopped is None:
+        while frames < cfg.max_frames and not validated.stopped:
             # 1. pick options where the last one ended, then an action from each copy's option
             epsilon = linear_schedule(cfg.epsilon_start, cfg.epsilon_end, explore, frames)
             q, _, logits = net(torch.from_numpy(states))
@@ -131,20 +130,13 @@ def train_minigrid_options(env_id: str, train_seeds: list[int], fail_probs: list
             # 5. every `eval_every` frames: a curve row, and the policy's steps on the validation worlds
             if frames >= next_eval or frames >= cfg.max_frames:
                 next_eval += cfg.eval_every
-                used = {"frames": frames, "episodes": copies.episodes - n, "gradient_steps": updates}
+                used = copies.used(frames, updates)
                 curve.append({**used, "epsilon": epsilon, "return": float(np.mean(finished)) if finished else 0.0,
                               "option_length": (frames - last_row) / max(option_ends, 1)})
                 finished, option_ends, last_row = [], 0, frames
-                net.eval()
-                value = float(measure(net))
-                net.train()
-                plateau.update(frames, value, net, used, may_stop=frames >= explore)
+                value = validated.check(net, frames, used, may_stop=frames >= explore)
                 bar.set_postfix(steps=f"{value:.1f}", eps=f"{epsilon:.2f}")
     finally:
         bar.close()
         copies.close()
-    if plateau.best is not None:
-        net.load_state_dict(plateau.best[3])
-    used = plateau.stopped or {"frames": frames, "episodes": copies.episodes - n, "gradient_steps": updates}
-    net.eval()
-    return net, curve, {**used, **plateau.record()}
+    return net, curve, validated.finish(net, copies.used(frames, updates))

@@ -21,9 +21,9 @@ import torch
 import torch.nn.functional as F
 from tqdm import tqdm
 
-from hnsdt.baselines.online import Plateau, sample_categorical
+from hnsdt.baselines.online import sample_categorical
 from hnsdt.baselines.ppo import advantages
-from hnsdt.baselines.minigrid_copies import TrainingCopies
+from hnsdt.baselines.minigrid_copies import TrainingCopies, Validated
 from hnsdt.models.minigrid_nets import MiniGridActorCritic, MiniGridActorCriticConfig
 from hnsdt.models.optim import Adam
 
@@ -57,15 +57,14 @@ def train_minigrid_ppo(env_id: str, train_seeds: list[int], fail_probs: list[flo
     rng = np.random.default_rng(cfg.seed)
     model = MiniGridActorCritic(net_cfg)
     opt = Adam(model.parameters(), lr=cfg.lr, eps=cfg.adam_eps)
-    plateau = Plateau(cfg.patience, float(getattr(measure, "floor", float("-inf"))),
-                      float(getattr(measure, "ceiling", float("inf"))))
+    validated = Validated(measure, cfg.patience)
     copies = TrainingCopies(env_id, list(train_seeds), list(fail_probs), cfg.num_envs, rng)
     n, T = cfg.num_envs, cfg.rollout_steps
     frames, updates, next_eval, curve, finished = 0, 0, cfg.eval_every, [], []
     states = copies.states()
     bar = tqdm(total=cfg.max_frames, desc=desc, unit="frame", disable=not progress)
     try:
-        while frames < cfg.max_frames and plateau.stopped is None:
+        while frames < cfg.max_frames and not validated.stopped:
             buf_s = np.zeros((T, n, states.shape[1]), np.int64)
             buf_a, buf_logp = np.zeros((T, n), np.int64), np.zeros((T, n), np.float32)
             buf_r, buf_v, buf_d = (np.zeros((T, n), np.float32) for _ in range(3))
@@ -110,22 +109,13 @@ def train_minigrid_ppo(env_id: str, train_seeds: list[int], fail_probs: list[flo
                     updates += 1
             frames += T * n
             bar.update(T * n)
-            curve.append({"frames": frames, "episodes": copies.episodes - n, "gradient_steps": updates,
-                          "return": float(np.mean(finished)) if finished else 0.0})
+            curve.append({**copies.used(frames, updates), "return": float(np.mean(finished)) if finished else 0.0})
             finished = []
             if frames >= next_eval or frames >= cfg.max_frames:
                 next_eval += cfg.eval_every
-                model.eval()
-                value = float(measure(model))
-                model.train()
-                plateau.update(frames, value, model, {"frames": frames, "episodes": copies.episodes - n,
-                                                      "gradient_steps": updates})
+                value = validated.check(model, frames, copies.used(frames, updates))
                 bar.set_postfix(steps=f"{value:.1f}")
     finally:
         bar.close()
         copies.close()
-    if plateau.best is not None:
-        model.load_state_dict(plateau.best[3])
-    used = plateau.stopped or {"frames": frames, "episodes": copies.episodes - n, "gradient_steps": updates}
-    model.eval()
-    return model, curve, {**used, **plateau.record()}
+    return model, curve, validated.finish(model, copies.used(frames, updates))

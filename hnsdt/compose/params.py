@@ -306,21 +306,23 @@ class MiniGridModelParams(Section):
     cell_dim: PositiveInt = Field(16, description="each view cell's embedding before the 49 are projected")
 
 
-class MiniGridPPOParams(Section):
+class MiniGridOnlineParams(Section):
+    """What every online learner on MiniGrid's worlds has (hnsdt.baselines.minigrid_copies)."""
     max_frames: PositiveInt = Field(250_000, description="the cap on env steps; it stops at its plateau before")
     num_envs: PositiveInt = Field(16, description="copies of the env stepped together")
+    eval_every: PositiveInt = Field(50_000, description="frames between validation measurements")
+    patience: PositiveInt = Field(4, description="measurements without fewer validation steps before stopping")
+
+
+class MiniGridPPOParams(MiniGridOnlineParams):
     rollout_steps: PositiveInt = Field(128, description="steps of every copy per iteration")
     lr: float = Field(1e-3, gt=0, description="Adam's learning rate")
     batch_size: PositiveInt = Field(256, description="steps per minibatch")
     update_epochs: PositiveInt = Field(4, description="passes over each rollout")
     ent_coef: float = Field(0.01, ge=0, description="entropy bonus")
-    eval_every: PositiveInt = Field(50_000, description="frames between validation measurements")
-    patience: PositiveInt = Field(4, description="measurements without fewer validation steps before stopping")
 
 
-class MiniGridDQNParams(Section):
-    max_frames: PositiveInt = Field(250_000, description="the cap on env steps; it stops at its plateau before")
-    num_envs: PositiveInt = Field(16, description="copies of the env stepped together")
+class MiniGridDQNParams(MiniGridOnlineParams):
     lr: float = Field(2.5e-4, gt=0, description="Adam's learning rate")
     buffer_size: PositiveInt = Field(10_000, description="replay capacity, in transitions")
     batch_size: PositiveInt = Field(128, description="replayed transitions per gradient step")
@@ -328,20 +330,14 @@ class MiniGridDQNParams(Section):
     train_every: PositiveInt = Field(10, description="frames per gradient step")
     target_period: PositiveInt = Field(50, description="gradient steps between target-network copies")
     exploration_fraction: float = Field(0.5, gt=0, le=1, description="of max_frames, over which epsilon decays")
-    eval_every: PositiveInt = Field(50_000, description="frames between validation measurements")
-    patience: PositiveInt = Field(4, description="measurements without fewer validation steps before stopping")
 
 
-class MiniGridOptionsParams(Section):
-    max_frames: PositiveInt = Field(250_000, description="the cap on env steps; it stops at its plateau before")
-    num_envs: PositiveInt = Field(16, description="copies of the env stepped together")
+class MiniGridOptionsParams(MiniGridOnlineParams):
     lr: float = Field(5e-4, gt=0, description="Adam's learning rate")
     n_options: PositiveInt = Field(8, description="the options")
     termination_reg: float = Field(0.01, ge=0, description="the margin that keeps options from ending every step")
     entropy_reg: float = Field(0.01, ge=0, description="the intra-option policies' entropy bonus")
     exploration_fraction: float = Field(0.5, gt=0, le=1, description="of max_frames, over which epsilon decays")
-    eval_every: PositiveInt = Field(50_000, description="frames between validation measurements")
-    patience: PositiveInt = Field(4, description="measurements without fewer validation steps before stopping")
 
 
 class MiniGridLearnParams(Section):
