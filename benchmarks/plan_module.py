@@ -5,7 +5,8 @@ and over the cells whose shortest way starts by walking away from the exit, besi
 backups cut. `--drawn` scores the hand-drawn maps too: test maps, a diagnosis only, never for a choice.
 
 Run: python benchmarks/plan_module.py [--family keydoor_maze] [--maps 8] [--steps 2000] [--lr 1e-2] [--batch 64]
-     [--backup moves|kernel] [--layouts 5] [--model CHECKPOINT_DIR] [--drawn] [--per-map] [--legs]
+     [--backup moves|kernel] [--goal target|learned] [--seed 0]
+     [--layouts 5] [--model CHECKPOINT_DIR] [--drawn] [--per-map] [--legs]
 Prints the training loss every 250 steps, then per split `all cells planned P (cut C); walk-away cells planned …`,
 and the time.
 """
@@ -38,6 +39,8 @@ def main() -> None:
     ap.add_argument("--batch", type=int, default=64)
     ap.add_argument("--lr", type=float, default=1e-2)
     ap.add_argument("--backup", default="moves", help="moves or kernel (hnsdt.models.plan.BACKUPS)")
+    ap.add_argument("--goal", default="target", help="target or learned (hnsdt.models.plan.GOALS)")
+    ap.add_argument("--seed", type=int, default=0, help="the module's initial weights and batches")
     ap.add_argument("--model", type=Path, help="score this trained DT's module (a checkpoint folder) instead")
     ap.add_argument("--drawn", action="store_true", help="also score the hand-drawn maps (a diagnosis: test maps)")
     ap.add_argument("--per-map", action="store_true", help="also print each hand-drawn map's scores")
@@ -49,7 +52,8 @@ def main() -> None:
         model, _ = load_checkpoint(args.model)
         module = model.view.map_plan
     else:
-        module = train_alone(args.family, args.maps, args.steps, args.batch, args.lr, args.backup, log=print)
+        module = train_alone(args.family, args.maps, args.steps, args.batch, args.lr, args.backup, args.seed,
+                             log=print, goal=args.goal)
     module.eval()
     splits = {"validation mazes": [generate(args.family, s) for s in range(VALIDATION_SEED,
                                                                            VALIDATION_SEED + args.layouts)]}

@@ -18,7 +18,7 @@ from hnsdt.models.view import ViewDecisionTransformer, turn_episodes, view_confi
 from test_generalisation import _turned_text
 
 REPO = Path(__file__).resolve().parents[1]
-STEPS = 1500  # the module's training steps in the learning test (measured: docs/unseen-layouts-studies.md)
+STEPS = 600  # the module's training steps in the learning test (measured: docs/unseen-layouts-studies.md)
 
 
 def _model(**sizes):
@@ -178,6 +178,7 @@ def test_the_modules_values_turn_and_shift_with_the_map():
     grid = whole_map(layout, states, 12)[0]
     target = np.array(layout.goal)
     base = _values(module, grid, [0, 1], target)
+    assert base[tuple(target)] == 0 and (np.delete(base.ravel(), target[0] * 12 + target[1]) < 0).all()  # from it
     turned = np.rot90(grid, k=-1).copy()  # clockwise: (r, c) -> (c, S-1-r)
     np.testing.assert_allclose(_values(module, turned, [0, 1], [target[1], 11 - target[0]]), np.rot90(base, k=-1),
                                rtol=1e-6, atol=1e-5)
@@ -203,5 +204,24 @@ def test_trained_on_a_handful_of_maps_it_plans_round_walls_on_maps_it_never_saw(
     layouts = [generate("keydoor_maze", seed) for seed in range(VALIDATION_SEED, VALIDATION_SEED + 3)]
     (planned, planned_away), (cut, cut_away) = shortest_way_shares(module, layouts), shortest_way_shares(module,
                                                                                                         layouts, 0)
-    assert planned >= 0.85 and planned_away >= 0.6, (planned, planned_away)
+    assert planned >= 0.9 and planned_away >= 0.8, (planned, planned_away)
     assert cut <= planned - 0.2 and cut_away <= planned_away - 0.1, (cut, cut_away)
+
+
+def test_a_held_out_loss_without_a_gradient_reads_its_own_steps():
+    """A held-out loss is measured under ``no_grad``: the module's own loss there reads that batch's read-out,
+    not the last training batch's (which has another number of steps)."""
+    layout = load_layout((REPO / "layouts/drawn/rooms_10x10.txt").read_text())
+
+    def batch(t: int, seed: int) -> dict:
+        _, states = _episode(layout, t, seed)
+        return {"states": torch.from_numpy(states)[None], "actions": torch.arange(t)[None] % 5,
+                "timesteps": torch.arange(t)[None], "subgoal_ids": torch.ones(1, t, dtype=torch.long),
+                "subgoal_targets": torch.tensor([[[1, 1]] * t]), "loss_mask": torch.ones(1, t, dtype=torch.bool)}
+
+    model = _model()
+    held_out = batch(6, 1)
+    with_grad = model.loss(held_out).item()
+    model.loss(batch(8, 0))  # a training batch of another length
+    with torch.no_grad():
+        assert model.loss(held_out).item() == pytest.approx(with_grad, rel=1e-6)

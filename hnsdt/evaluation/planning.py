@@ -39,7 +39,7 @@ def demonstrations(family: str, maps: int, side: int) -> list[torch.Tensor]:
 
 
 def train_alone(family: str, maps: int, steps: int, batch: int = 64, lr: float = 1e-2, backup: str = "moves",
-                seed: int = 0, log: Callable[[str], None] = lambda line: None) -> MapPlanner:
+                seed: int = 0, log: Callable[[str], None] = lambda line: None, **module_kw) -> MapPlanner:
     """The module trained alone (VIN's objective: its own action head's cross-entropy on the demonstrations'
     actions) on the family's first ``maps`` layouts, ``steps`` Adam steps of ``batch`` random steps each."""
     side = max(max(generate(family, s).shape) for s in range(maps))
@@ -47,7 +47,7 @@ def train_alone(family: str, maps: int, steps: int, batch: int = 64, lr: float =
     log(f"{len(actions)} steps with a target on {maps} maps (side {side}, at most {MapPlanner.iterations(side)} "
         "backups)")
     torch.manual_seed(seed)
-    module = MapPlanner(16, states.shape[1] - 2, backup=backup)
+    module = MapPlanner(16, states.shape[1] - 2, backup=backup, **module_kw)
     opt = torch.optim.Adam(module.parameters(), lr=lr)
     rng = np.random.default_rng(seed)
     for step in range(steps):

@@ -6,12 +6,15 @@ and is read out at the agent's cell into the state token.
 Two backups (``backup``):
 
 * ``moves`` (the default): value iteration over the grid's own four moves, the way Neural A* (Yonetani et al.
-  2021) searches over a learned cost map. From its own code, the mark and the flags each cell learns a step cost
-  and a log-probability of being the goal; a cell's value is the larger of its goal value and its best
-  neighbour's less its step cost. The transition is the environment's (a move reaches one of four neighbours);
-  what is learned is which cells are cheap to cross (floor, a door the flags open) and which is the goal in this
-  state. The read-out is the four neighbours' values less the agent's: no distance or direction is an input or a
-  target, and with the backups cut the read-out points a shortest way from about half the cells.
+  2021) searches over a learned cost map. From its own code, the mark and the flags each cell learns a step cost;
+  values start at the sub-goal's target cell (``goal="target"``, the default: the cell the planner's operator
+  names, as VIN's and GPPN's goal map) and a cell's value is its best neighbour's less its step cost. The
+  transition is the environment's (a move reaches one of four neighbours); what is learned is which cells are
+  cheap to cross in this state (floor, a door the flags open). A step without a target (a DT without sub-goals)
+  starts from each cell's learned goal value instead — its log-probability of being the goal — as does every
+  step with ``goal="learned"``. The read-out is the four neighbours' values less the agent's: no distance or
+  direction is an input or a target, and with the backups cut the read-out points a shortest way from about a
+  third of the cells.
 * ``kernel``: VIN's (Tamar et al. 2016): ``channels`` action values per cell, each the cell's reward plus a
   learned 3 × 3 kernel's sum of the neighbours' values, the value their maximum; read out as the agent's action
   values and its neighbours' values. Measured not to learn to plan from our demonstrations (its actions a
@@ -22,11 +25,11 @@ Both read out into the transformer and into the module's own action head on the 
 
 How far it plans: a side × side map gets up to side² backups — at least the length of any path on it (a path
 visits each cell at most once), so a value can reach every cell the target can be reached from, whatever the
-map's shape; ``moves`` stops as soon as no value changes. The layers act per cell, so any map's side runs. What
-does depend on the training maps is learned: how far a goal's value carries before a cell that is not the goal
-outranks it (their log-probabilities' gap over the floor's step cost), measured at about the training legs'
-length — the hand-drawn maps' long detours lie beyond it. Scaling the goal values by side² removes that horizon
-but made learning depend on the initial weights (1 of 4 seeds learned to plan; docs/unseen-layouts-studies.md).
+map's shape; ``moves`` stops as soon as no value changes. The layers act per cell, so any map's side runs. With
+a learned goal, how far a goal's value carries is learned too — until a cell that is not the goal outranks it
+(their log-probabilities' gap over the floor's step cost), measured at about the training legs' length, so the
+hand-drawn maps' long detours lay beyond it; from the target's cell nothing outranks a path, and what is left
+learned is how much dearer a wall is than a detour (docs/unseen-layouts-studies.md).
 ``kernel``'s weights are scaled to an absolute sum of at most 1, so its values stay bounded over 576 backups.
 
 The plan is computed once per sub-goal segment (a run of steps with the same map, flags and target) and read
@@ -43,6 +46,7 @@ from hnsdt.envs.dynamics import N_ACTIONS
 from hnsdt.envs.observation import N_CODES
 
 BACKUPS = ("kernel", "moves")
+GOALS = ("learned", "target")  # (moves) where values start: each cell's learned goal value, or the target's cell
 LOWEST = 20.0  # (moves) a neighbour's read-out at most this far below the agent's cell: walls and the edge
 CACHE = 4096  # plans kept at inference; the cache empties when full and whenever the weights may change
 
@@ -60,11 +64,13 @@ class MapPlanner(nn.Module):
     """Each cell's own layers → backups (at most side²) → the read-out at the agent's cell (``out_features``
     numbers)."""
 
-    def __init__(self, code_dim: int, n_flags: int, channels: int = 8, hidden: int = 32, backup: str = "moves"):
+    def __init__(self, code_dim: int, n_flags: int, channels: int = 8, hidden: int = 32, backup: str = "moves",
+                 goal: str = "target"):
         super().__init__()
-        if backup not in BACKUPS:
-            raise ValueError(f"backup {backup!r} is not one of {', '.join(BACKUPS)}")
-        self.n_flags, self.backup = n_flags, backup
+        for name, value, allowed in (("backup", backup, BACKUPS), ("goal", goal, GOALS)):
+            if value not in allowed:
+                raise ValueError(f"{name} {value!r} is not one of {', '.join(allowed)}")
+        self.n_flags, self.backup, self.goal = n_flags, backup, goal
         self.code_emb = nn.Embedding(N_CODES, code_dim)  # its own: the view's embedding learns at another pace
         outputs = 1 if backup == "kernel" else 2  # (moves: a step's cost and the goal's log-value per cell)
         self.reward = nn.Sequential(nn.Conv2d(code_dim + 1 + n_flags, hidden, 1), nn.ReLU(),
@@ -99,7 +105,7 @@ class MapPlanner(nn.Module):
         spread = flags[:, :self.n_flags, None, None].expand(-1, -1, side, side)
         reward = self.reward(torch.cat([cells, mark, spread], dim=1))
         if self.backup == "moves":
-            return self._plan_moves(reward, backups)
+            return self._plan_moves(reward, mark, backups)
         q_reward = self.q_from_reward(reward)
         weight = self.kernel()
         value = q_reward.max(dim=1, keepdim=True).values
@@ -107,12 +113,15 @@ class MapPlanner(nn.Module):
             value = (q_reward + torch.einsum("ck,nkhw->nchw", weight, taps(value))).max(dim=1, keepdim=True).values
         return q_reward, value
 
-    def _plan_moves(self, reward: torch.Tensor, backups: int) -> tuple[torch.Tensor, torch.Tensor]:
-        """Backups over the four moves: a cell's value is the larger of its goal value (its learned
-        log-probability of being the goal) and its best neighbour's less the cell's learned step cost (≥ 0);
-        stops once nothing changes (at most ``backups``)."""
+    def _plan_moves(self, reward: torch.Tensor, mark: torch.Tensor, backups: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """Backups over the four moves: a cell's value is the larger of its goal value (``goal="target"`` and a
+        marked cell: 0 there, -1e9 elsewhere; else its learned log-probability of being the goal) and its best
+        neighbour's less the cell's learned step cost (> 0); stops once nothing changes (at most ``backups``)."""
         cost = F.softplus(reward[:, :1])
         goal = F.logsigmoid(reward[:, 1:])
+        if self.goal == "target":
+            marked = mark.flatten(1).amax(dim=1)[:, None, None, None] > 0
+            goal = torch.where(marked, torch.where(mark > 0, 0.0, -1e9), goal)
         value = goal
         for _ in range(backups):
             padded = F.pad(value[:, 0], (1, 1, 1, 1), value=-1e9)

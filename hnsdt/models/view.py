@@ -83,7 +83,8 @@ class ViewEncoder(nn.Module):
 
     def __init__(self, radius: int, code_dim: int, n_flags: int, width: int, conv_layers: int = 0,
                  conv_channels: int = 32, value_iterations: int = 0, value_channels: int = 8,
-                 whole_map: bool = False, plan_channels: int = 8, plan_backup: str = "moves"):
+                 whole_map: bool = False, plan_channels: int = 8, plan_backup: str = "moves",
+                 plan_goal: str = "target"):
         super().__init__()
         self.radius, self.n_flags = radius, n_flags
         self.code_emb = nn.Embedding(N_CODES, code_dim)
@@ -102,7 +103,7 @@ class ViewEncoder(nn.Module):
         self.flag_proj = Linear(max(n_flags, 1), width, bias=False)
         self.map_plan = None
         if whole_map:
-            self.map_plan = MapPlanner(code_dim, n_flags, plan_channels, backup=plan_backup)
+            self.map_plan = MapPlanner(code_dim, n_flags, plan_channels, backup=plan_backup, goal=plan_goal)
             self.plan_proj = Linear(self.map_plan.out_features, width, bias=False)
 
     def forward(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
@@ -115,8 +116,9 @@ class ViewEncoder(nn.Module):
         flat = states.reshape(-1, states.shape[-1])
         plan = self.map_plan(flat[:, cells + self.n_flags:], flat[:, cells:cells + self.n_flags],
                              None if targets is None else targets.reshape(-1, 2), flat[:, :2])
-        if torch.is_grad_enabled():  # the module's own action logits, from its neighbours' values: its loss
-            self.plan_logits = self.map_plan.act(plan[:, -4:])  # (steps, actions), read by the model's loss
+        # the module's own action logits from its neighbours' values, read by the model's loss — with or without a
+        # gradient (a held-out loss is measured under no_grad)
+        self.plan_logits = self.map_plan.act(plan[:, -4:])  # (steps, actions)
         return out + self.plan_proj(plan).reshape(*out.shape)
 
     @staticmethod
@@ -270,6 +272,9 @@ class ViewDTConfig(DTConfig):
     #                          sub-goal's target (hnsdt.models.plan.MapPlanner); needs the episode formulation
     plan_backup: str = "moves"  # its backup: "moves" (the four moves, each cell's step cost and goal value
     #                             learned) or "kernel" (VIN's learned 3 x 3 kernel; hnsdt.models.plan)
+    plan_goal: str = "target"  # (moves) where its values start: the sub-goal's target cell ("target"; a step
+    #                            without one, or a DT without sub-goals: each cell's learned goal value) or always
+    #                            each cell's learned goal value ("learned")
     plan_channels: int = 8  # (kernel) its action values per cell
     plan_loss: float = 1.0  # weight of the module's own imitation loss beside the transformer's (0: end to end
     #                         through the transformer only)
@@ -300,7 +305,7 @@ class ViewDecisionTransformer(ViewModel, DecisionTransformer, arch="view_decisio
         cfg = self.cfg
         self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, width, cfg.conv_layers,
                                 cfg.conv_channels, cfg.value_iterations, cfg.value_channels, cfg.whole_map,
-                                cfg.plan_channels, cfg.plan_backup)
+                                cfg.plan_channels, cfg.plan_backup, cfg.plan_goal)
 
     def embed_states(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
         return self.view(states, targets)
