@@ -53,7 +53,7 @@ from hnsdt.models.checkpoint import load_checkpoint  # noqa: E402
 from hnsdt.compose.training import train_all  # noqa: E402
 
 MAX_STEPS = {"keydoor": 100, "multikeydoor": 250, "keydoor_obstacles": 150, "keydoor_maze": 150,
-             "keydoor_mixed": 150}
+             "keydoor_mixed": 150, "keydoor_perfect": 150, "keydoor_mazes": 150}
 
 
 def main() -> None:

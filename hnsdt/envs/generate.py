@@ -12,8 +12,13 @@ keep the family's structure):
 * ``keydoor_maze`` — ``keydoor`` whose two rooms are braided mazes (a random depth-first maze on every other
   cell, then a third of its inner walls removed so that there are loops), the door between two corridors: the
   random-maze training maps of value-iteration and gated path-planning networks, with Case 1's key and door.
+* ``keydoor_perfect`` — ``keydoor_maze`` without the braiding: each room a perfect maze (one way between any
+  two cells, as the depth-first mazes VIN's and GPPN's planners train on), so that a way often starts by walking
+  away from its target, for long.
 * ``keydoor_mixed`` — both single-door shapes in every split: ``keydoor`` at even seeds, ``keydoor_maze`` at
   odd ones (each layout is that family's layout of the same seed, and keeps its name).
+* ``keydoor_mazes`` — both maze shapes in every split: ``keydoor_maze`` at even seeds, ``keydoor_perfect`` at
+  odd ones.
 * ``multikeydoor`` — Case 2's structure: two parallel walls make three rooms in a chain, doors ``A`` and ``B``
   in them; the start and key ``a`` in the first room, key ``b`` and item ``1`` behind door ``A``, item ``2``
   and the exit behind door ``B`` (the keys of later doors sit behind earlier doors).
@@ -33,8 +38,10 @@ import numpy as np
 
 from hnsdt.envs.layout import Layout, LayoutError, parse_layout
 
-FAMILIES = ("keydoor", "multikeydoor", "keydoor_obstacles", "keydoor_maze", "keydoor_mixed")
-MIXED = {"keydoor_mixed": ("keydoor", "keydoor_maze")}  # a family drawn from others, by seed (seed % len)
+FAMILIES = ("keydoor", "multikeydoor", "keydoor_obstacles", "keydoor_maze", "keydoor_mixed", "keydoor_perfect",
+            "keydoor_mazes")  # (append only: a family's index seeds its layouts)
+MIXED = {"keydoor_mixed": ("keydoor", "keydoor_maze"),  # a family drawn from others, by seed (seed % len)
+         "keydoor_mazes": ("keydoor_maze", "keydoor_perfect")}
 
 
 @dataclass(frozen=True)
@@ -48,9 +55,10 @@ class FamilySizes:
 DEFAULT_SIZES = {"keydoor": FamilySizes(rows=(5, 7), cols=(5, 8)),
                  "multikeydoor": FamilySizes(rows=(6, 9), cols=(9, 12)),
                  "keydoor_obstacles": FamilySizes(rows=(7, 11), cols=(7, 12)),
-                 "keydoor_maze": FamilySizes(rows=(7, 11), cols=(7, 13))}
+                 "keydoor_maze": FamilySizes(rows=(7, 11), cols=(7, 13)),
+                 "keydoor_perfect": FamilySizes(rows=(7, 11), cols=(7, 13))}
 _MIN = {"keydoor": (3, 5), "multikeydoor": (4, 8), "keydoor_obstacles": (6, 7),  # the smallest grid that can
-        "keydoor_maze": (5, 7)}                                                  # hold the family's structure
+        "keydoor_maze": (5, 7), "keydoor_perfect": (5, 7)}                       # hold the family's structure
 
 
 def check_sizes(family: str, sizes: FamilySizes) -> None:
@@ -87,8 +95,8 @@ def generate(family: str, seed: int, sizes: FamilySizes | None = None) -> Layout
 
 
 def _draw(family: str, rng: np.random.Generator, sizes: FamilySizes) -> str:
-    if family == "keydoor_maze":
-        return _draw_maze(rng, sizes)
+    if family in ("keydoor_maze", "keydoor_perfect"):
+        return _draw_maze(rng, sizes, braid=family == "keydoor_maze")
     h = int(rng.integers(sizes.rows[0], sizes.rows[1] + 1))
     w = int(rng.integers(sizes.cols[0], sizes.cols[1] + 1))
     grid = np.full((h, w), ".", dtype="<U1")
@@ -118,9 +126,9 @@ def _draw(family: str, rng: np.random.Generator, sizes: FamilySizes) -> str:
     return "\n".join("".join(row) for row in grid) + "\n"
 
 
-def _draw_maze(rng: np.random.Generator, sizes: FamilySizes) -> str:
-    """Two braided maze rooms (odd sizes: corridors on even rows / columns of each room), the wall between them
-    with door ``A`` at a corridor row; start and key in the first room, the exit in the second."""
+def _draw_maze(rng: np.random.Generator, sizes: FamilySizes, braid: bool = True) -> str:
+    """Two maze rooms (odd sizes: corridors on even rows / columns of each room), braided or perfect, the wall
+    between them with door ``A`` at a corridor row; start and key in the first room, the exit in the second."""
     h = int(rng.integers(sizes.rows[0], sizes.rows[1] + 1)) | 1
     w = int(rng.integers(sizes.cols[0], sizes.cols[1] + 1))
     w += (w % 2 == 0)  # two odd-width rooms and the wall: an odd width
@@ -144,7 +152,7 @@ def _draw_maze(rng: np.random.Generator, sizes: FamilySizes) -> str:
             seen.add((nr, nc))
             stack.append((nr, nc))
         inner = [(r, col) for r in range(h) for col in room if (r + col - room.start) % 2 == 1]
-        for r, col in inner:  # braid: open a third of the walls between two corridor cells
+        for r, col in inner if braid else ():  # braid: open a third of the walls between two corridor cells
             if grid[r, col] == "#" and rng.random() < 1 / 3:
                 grid[r, col] = "."
     grid[2 * int(rng.integers(0, (h + 1) // 2)), c] = "A"
