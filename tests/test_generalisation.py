@@ -957,6 +957,10 @@ def test_the_dts_budget_is_chosen_on_the_validation_layouts(tmp_path):
         assert len(course.starts) == 2 and (course.starts[0, :2] == src.layout.start).all()
     (baseline,) = plan_unseen(validate(params), "gru", dataset)
     assert baseline.measure is None
+    params["generalisation"]["validation_starts"] = 24  # (an experiment's own: train.validation's replaced)
+    (run,) = plan_unseen(validate(params), "hnsdt", dataset)
+    assert [len(course.starts) for course in run.measure.courses] == [4] * 6
+    del params["generalisation"]["validation_starts"]
     params["generalisation"]["validation_layouts"] = 0  # the paper protocol's budget
     (run,) = plan_unseen(validate(params), "hnsdt", dataset)
     assert run.measure is None and run.train_cfg.validation == params["train"]["validation"]["hnsdt"]["share"]

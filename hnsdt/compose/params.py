@@ -201,6 +201,10 @@ class GeneralisationParams(Section):
     validation_families: list[Literal[FAMILIES]] = Field(
         default_factory=list, description="validation_layouts of each of these families (empty: the training "
         "family's): one split of several shapes, on which training families can be compared")
+    validation_starts: PositiveInt | None = Field(None, description="every learner that trains to a plateau on the "
+                                                  "validation layouts walks from about this many start states "
+                                                  "over them (None: train.validation.<method>.starts, a "
+                                                  "baseline's own starts)")
     minigrid: list[MiniGridSource] = Field(default_factory=list, description="MiniGrid grids, zero-shot")
     drawn: DrawnSource | None = Field(None, description="a folder of layout files (maps of any shape), zero-shot")
     max_offset: PositiveInt = Field(7, description="a sub-goal target further than this many cells along an axis "

@@ -332,7 +332,8 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
                          "generalisation.random_episodes_per_layout > 0 (random walks) and collect again")
     measure = None
     if _budget_on_validation_layouts(params, method, train_cfg):
-        starts = params.train.validation[method].starts if method in params.train.validation else train_cfg.starts
+        starts = g.validation_starts or (params.train.validation[method].starts if method in params.train.validation
+                                         else train_cfg.starts)
         measure = StepsToExit.on_layouts(validation(), g.max_steps, starts, method, layout_executor(params, method),
                                          facts)
     elif lookup_method(method).stage != "train" and getattr(train_cfg, "patience", 0):  # (a DT's: train.validation)
