@@ -763,7 +763,7 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
 def test_a_bad_generalisation_knob_is_one_line_naming_it(tmp_path):
     params = _tiny_generalisation_params(tmp_path)
     params["generalisation"]["family"] = "maze"
-    with pytest.raises(ValueError, match=r"^params: generalisation.family: Input should be 'keydoor', .*'keydoor_mixed', got 'maze'"):
+    with pytest.raises(ValueError, match=r"^params: generalisation.family: Input should be 'keydoor', .*'keydoor_mazes', got 'maze'"):
         validate(params)
     params["generalisation"].update(family="keydoor", methods=["hnsdt", "hnsdt"])
     with pytest.raises(ValueError, match="generalisation.methods: must not repeat"):
@@ -1077,6 +1077,14 @@ def test_a_further_experiment_is_a_params_block_of_the_keys_it_changes(tmp_path)
     params["unseen_experiments"] = {"Two keys": {}}
     with pytest.raises(ParamsError, match=r"^params: unseen_experiments: 'Two keys': an experiment's name is lower-case"):
         validate(params)
+    # a family without a decision transformer's size: one line before the collection writes anything
+    from hnsdt.stages.unseen_experiment import run_unseen_experiment
+
+    params["unseen_experiments"] = {"perfect": {"family": "keydoor_perfect"}}
+    assert "keydoor_perfect" not in params["models"]
+    with pytest.raises(ParamsError, match=r"missing key models.keydoor_perfect \(the decision transformers' size"):
+        run_unseen_experiment(unseen_experiment(validate(params), "perfect"), tmp_path / "perfect", progress=False)
+    assert not (tmp_path / "perfect").exists()
 
 
 def test_a_folder_of_drawn_maps_is_checked_with_one_line_naming_the_problem(tmp_path):

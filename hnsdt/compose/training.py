@@ -233,6 +233,15 @@ def _last_metric(curve: list[dict]) -> str:
 
 # -- the unseen-layout experiment: view networks over many layouts ---------------------------------------
 
+def require_dt_size(params: Params) -> None:
+    """One line when the unseen-layout experiment trains a decision transformer on a family without a size in
+    ``models`` — checked before any work (an experiment's stage collects first)."""
+    g = params.need("generalisation")
+    if g.family not in params.models and any(lookup_method(m).stage == "train" for m in g.learned):
+        raise params.error(f"missing key models.{g.family} (the decision transformers' size on the "
+                           f"generalisation family {g.family})")
+
+
 def layout_network_configs(params: Params, method: str, seed: int, layout: Layout):
     """``(view network config, training config)`` of one method and seed of the unseen-layout experiment
     (``generalisation`` in params.yaml), ``layout`` one of its training layouts (their flags). Nothing in them
@@ -248,9 +257,7 @@ def layout_network_configs(params: Params, method: str, seed: int, layout: Layou
     view_cls = resolve(code_of(method).view_network).config_class
     if entry.stage == "train":  # a decision transformer: `train` and `models.<family>`
         ts, models = train_settings(params), params.models
-        if g.family not in models:
-            raise params.error(f"missing key models.{g.family} (the decision transformers' size on the "
-                               f"generalisation family {g.family})")
+        require_dt_size(params)
         try:
             cfg = view_config(entry.condition, layout.n_flags, g.view_radius, g.max_offset, g.conv_layers,
                               g.value_iterations, g.whole_map, max_timestep=g.max_steps, dropout=params.train.dropout,
