@@ -217,7 +217,8 @@ def variant_rows(args, params, table: pd.DataFrame, best: dict, rounds: dict, da
     g = params.generalisation
     side = 2 * g.view_radius + 1
     encoder = f"{side}×{side} " + (f"+ VI {g.value_iterations}" if g.value_iterations else
-                                   f"+ {g.conv_layers} conv" if g.conv_layers else "flattened")
+                                   f"+ {g.conv_layers} conv" if g.conv_layers else "flattened") + (
+        " + whole-map planner" if g.whole_map else "")
     return table.assign(
         variant=args.record, ingredient=args.ingredient, family=g.family, train_layouts=g.train_layouts,
         episodes_per_map=2 * g.episodes_per_layout + g.random_episodes_per_layout, encoder=encoder,
