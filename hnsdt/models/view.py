@@ -116,9 +116,9 @@ class ViewEncoder(nn.Module):
         flat = states.reshape(-1, states.shape[-1])
         plan = self.map_plan(flat[:, cells + self.n_flags:], flat[:, cells:cells + self.n_flags],
                              None if targets is None else targets.reshape(-1, 2), flat[:, :2])
-        # the module's own action logits from its neighbours' values, read by the model's loss — with or without a
-        # gradient (a held-out loss is measured under no_grad)
-        self.plan_logits = self.map_plan.act(plan[:, -4:])  # (steps, actions)
+        # the neighbours' read-out of these steps, from which the model's loss takes the module's own action logits
+        # (kept with or without a gradient: a held-out loss is measured under no_grad; acting never reads it)
+        self.plan_read = plan[:, -4:]  # (steps, 4)
         return out + self.plan_proj(plan).reshape(*out.shape)
 
     @staticmethod
@@ -326,7 +326,7 @@ class ViewDecisionTransformer(ViewModel, DecisionTransformer, arch="view_decisio
         actions, mask, steps = batch["actions"], batch["loss_mask"], batch.get("steps")
         if steps is not None:
             actions, mask = actions[steps], mask[steps]
-        nll = F.cross_entropy(self.view.plan_logits, actions.reshape(-1), reduction="none")
+        nll = F.cross_entropy(self.view.map_plan.act(self.view.plan_read), actions.reshape(-1), reduction="none")
         mask = mask.reshape(-1).float()
         return loss + self.cfg.plan_loss * (nll * mask).sum() / mask.sum().clamp(min=1.0)
 
