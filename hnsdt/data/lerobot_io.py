@@ -36,6 +36,7 @@ from lerobot.datasets import dataset_writer as _lerobot_writer  # noqa: E402
 from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: E402
 
 from hnsdt.data.card import data_md5, render_card  # noqa: E402
+from hnsdt.data.episode_stats import vectorised_episode_stats  # noqa: E402
 from hnsdt.data.features import frame, info_features  # noqa: E402
 from hnsdt.data.format import (EPISODES_TABLE, FORMAT_VERSION, HNSDT_META, DatasetError,  # noqa: E402,F401
                                check_dataset, episode_table)
@@ -81,6 +82,25 @@ def _skip_fingerprints():
         yield
     finally:
         _hf_arrow_dataset.generate_fingerprint = original
+
+
+@contextlib.contextmanager
+def _metadata_written_once(ds: LeRobotDataset):
+    """lerobot rewrites ``meta/info.json`` and ``meta/stats.json`` after every episode (the running totals and
+    stats; a quarter of the write time with the episode stats vectorised: 2.8 of 11 s for 256 episodes, profiled)
+    and reads neither back while writing. We write both once, from the same objects, when the episodes are in:
+    the same files."""
+    from lerobot.datasets import dataset_metadata
+    from lerobot.datasets.io_utils import write_info, write_stats
+
+    dataset_metadata.write_info = dataset_metadata.write_stats = lambda *args: None
+    try:
+        yield
+    finally:
+        dataset_metadata.write_info, dataset_metadata.write_stats = write_info, write_stats
+    write_info(ds.meta.info, ds.meta.root)
+    if ds.meta.stats is not None:
+        write_stats(ds.meta.stats, ds.meta.root)
 
 
 def write_dataset(root: str | Path, repo_id: str, layout: Layout | list[Layout], episodes: list[dict], fps: int,
@@ -131,7 +151,8 @@ def write_frames(folder: Path, repo_id: str, layouts: list[Layout], episodes: li
             # Register the tasks in vocabulary order first, so task_index is the same on every run.
             used = sorted({int(i) for ep in episodes for i in ep["subgoal_ids"]})
             ds.meta.save_episode_tasks([ID_TO_NAME[i] for i in used])
-            with _skip_image_embedding(features), _skip_fingerprints():
+            with (_skip_image_embedding(features), _skip_fingerprints(), vectorised_episode_stats(),
+                  _metadata_written_once(ds)):
                 for ep in tqdm(episodes, desc=desc, unit="episode", disable=not progress):
                     _add_episode(ds, ep, features, draw, view)
                     ds.save_episode()

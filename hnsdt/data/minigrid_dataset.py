@@ -38,8 +38,10 @@ from tqdm import tqdm
 
 from hnsdt.core.fileio import atomic_dir
 from hnsdt.data.card import data_md5
+from hnsdt.data.episode_stats import vectorised_episode_stats
 from hnsdt.data.format import EPISODES_TABLE, HNSDT_META, DatasetError, check_dataset, frame_columns
-from hnsdt.data.lerobot_io import LeRobotDataset, _skip_fingerprints, _skip_image_embedding
+from hnsdt.data.lerobot_io import (LeRobotDataset, _metadata_written_once, _skip_fingerprints,
+                                   _skip_image_embedding)
 from hnsdt.minigrid.collect import STATE_NAMES, SUBGOAL_NAMES
 from hnsdt.models.windows import Frames, frames_from_arrays
 
@@ -103,7 +105,8 @@ def write_minigrid_dataset(root: str | Path, repo_id: str, episodes: list[dict],
         ds = LeRobotDataset.create(repo_id, fps=fps, features=FEATURES, root=staging, use_videos=False)
         used = sorted({name for ep in episodes for name in ep["names"]})  # tasks first, sorted: same indices
         ds.meta.save_episode_tasks(used)
-        with _skip_image_embedding(FEATURES), _skip_fingerprints():
+        with (_skip_image_embedding(FEATURES), _skip_fingerprints(), vectorised_episode_stats(),
+              _metadata_written_once(ds)):
             for ep in tqdm(episodes, desc=f"write {root.name}", unit="episode", disable=not progress):
                 for frame in _frames(ep):
                     ds.add_frame(frame)
