@@ -38,10 +38,7 @@ from tqdm import tqdm
 
 from hnsdt.core.fileio import atomic_dir
 from hnsdt.data.card import data_md5
-from hnsdt.data.episode_stats import vectorised_episode_stats
 from hnsdt.data.format import EPISODES_TABLE, HNSDT_META, DatasetError, check_dataset, frame_columns
-from hnsdt.data.lerobot_io import (LeRobotDataset, _metadata_written_once, _skip_fingerprints,
-                                   _skip_image_embedding)
 from hnsdt.minigrid.collect import STATE_NAMES, SUBGOAL_NAMES
 from hnsdt.models.windows import Frames, frames_from_arrays
 
@@ -98,6 +95,10 @@ def write_minigrid_dataset(root: str | Path, repo_id: str, episodes: list[dict],
     """``episodes`` (:func:`hnsdt.minigrid.collect.collect_episodes`) as a LeRobot dataset at ``root``, built in a
     temporary folder beside it and moved into place only when complete. ``meta``: env_id, world_seeds,
     fail_probs, epsilon, seed, license."""
+    from hnsdt.data.episode_stats import vectorised_episode_stats  # (lerobot takes seconds to import: only when
+    from hnsdt.data.lerobot_io import (LeRobotDataset, _metadata_written_once,  # writing, not in the learners'
+                                       _skip_fingerprints, _skip_image_embedding)  # processes, which read)
+
     root = Path(root)
     if not episodes:
         raise ValueError(f"{root}: no episodes to write")
