@@ -720,6 +720,13 @@ def test_the_protocol_trains_every_method_on_views_and_evaluates_every_split(tmp
     assert controllers.first_action_right.all() and controllers.achieved.all()
     walks = controllers[controllers.operator.str.startswith(("GoTo", "Move")) & (controllers.fail_prob == 0)]
     assert len(walks) and (walks.steps == walks.optimal_steps).all() and (walks.right_actions == walks.steps).all()
+    # each episode's sub-goals are its segment rows; the planner is called at least once for every episode of a
+    # plan-follower (its first plan, then every replan), never for the others
+    episode_keys = ["method", "seed", "split", "layout", "fail_prob", "episode"]
+    followers = table[table.method.isin(["hnsdt", "symbolic"])].set_index(episode_keys)
+    per_episode = segments.groupby(episode_keys).size().reindex(followers.index, fill_value=0)
+    assert (followers.subgoals == per_episode).all() and (followers.plans >= 1).all()
+    assert (table[table.method.isin(["gru", "dqn"])][["subgoals", "plans"]] == 0).all().all()
     # one split and method alone (`--splits drawn --methods gru`: a user's maps without the rest) have the
     # episodes they have among all, beside the reference's
     alone = evaluate_unseen(validate(params), tmp_path / "models", tmp_path / "alone", Compute(workers=1),
@@ -1347,3 +1354,26 @@ def test_first_attempts_keep_each_episodes_segments_up_to_its_first_failure():
                              for e, s, a in rows]).iloc[::-1]  # (in any order)
     kept = _benchmark("goto_legs").first_attempts(segments)
     assert sorted(zip(kept.episode, kept.start, kept.leg)) == [(0, 0, 0), (0, 5, 1), (1, 0, 0), (1, 4, 1)]
+
+
+def test_operators_are_compared_on_the_splits_where_both_evaluated_the_same_maps():
+    """The report sets HNSDT's episodes under one operator set beside another's only on splits whose maps are the
+    same in both (a held-out split of another family is not), with each side's success, sub-goals and planner
+    calls per episode at each fail_prob."""
+    import pandas as pd
+
+    from hnsdt.report.unseen import operators_table
+
+    def episodes(split_maps, subgoals, plans):
+        return pd.DataFrame([{"method": "hnsdt", "split": split, "layout": m, "fail_prob": fp, "success": True,
+                              "subgoals": subgoals, "plans": plans}
+                             for split, maps in split_maps.items() for m in maps for fp in (0.0, 0.3)])
+
+    move = episodes({"heldout": ["maze-1"], "drawn": ["spiral", "comb"]}, 12, 1)
+    goto = episodes({"heldout": ["mazes-1"], "drawn": ["spiral", "comb"]}, 5, 2)
+    lines = operators_table(move, goto, ("move", "goto"))
+    assert lines[0] == ("| split | fail_prob | Move: success | Move: sub-goals / episode | Move: planner calls / "
+                        "episode | GoTo: success | GoTo: sub-goals / episode | GoTo: planner calls / episode |")
+    assert lines[2:] == ["| hand-drawn maps | 0 | 1.000 | 12.0 | 1.0 | 1.000 | 5.0 | 2.0 |",
+                         "| hand-drawn maps | 0.3 | 1.000 | 12.0 | 1.0 | 1.000 | 5.0 | 2.0 |"]
+    assert operators_table(move.drop(columns="plans"), goto, ("move", "goto")) == []

@@ -29,6 +29,7 @@ class Episode:
     segments: list = field(default_factory=list)
     replans: int = 0
     replan_counts: dict = field(default_factory=dict)  # replans per reason (hnsdt.agents.executor.REPLAN_REASONS)
+    plans: int = 0  # the planner's calls: its first plan and every replan (0: an episode no planner drove)
 
     @property
     def length(self) -> int:
@@ -119,6 +120,7 @@ def rollout(env: KeyDoorVectorEnv, agent: Agent, seed: int | Sequence[int], star
             success=bool(env.terminated[i]),
             plan=list(ex.initial_plan) if ex else [], segments=list(ex.segments) if ex else [],
             replans=ex.replans if ex else 0, replan_counts=dict(ex.replan_counts) if ex else {},
+            plans=1 + ex.replans if ex else 0,
         ))
     return episodes
 

@@ -15,7 +15,7 @@ from hnsdt.agents.executor import ExecutorConfig
 from hnsdt.agents.rollout import Episode
 from hnsdt.envs.layout import Layout, equal_runs
 from hnsdt.evaluation.runs import Batch, EvalTask, Evaluation, episode_id, load_model, rerun
-from hnsdt.evaluation.segments import layout_navigator, segment_facts
+from hnsdt.evaluation.segments import executed_segments, layout_navigator, segment_facts
 from hnsdt.evaluation.tables import LAYOUT_CELL, summary
 
 
@@ -45,7 +45,7 @@ def layout_rows(task: EvalTask, batch: Batch, episodes: list[Episode]) -> tuple[
                    "fail_prob": float(batch.fail_prob[run.start + i]), "episode": i % per_fail_prob}
             name = episode_id(task.method, src.name, ids["fail_prob"], task.seed, ids["episode"])
             rows.append(ids | {"episode_id": name, "success": bool(ep.success), "steps": ep.length,
-                               "reward": round(ep.ret, 6)})
+                               "reward": round(ep.ret, 6), "subgoals": executed_segments(ep), "plans": ep.plans})
             if ep.segments:
                 segments += [ids | row for row in segment_facts(ep, navigator, ids["fail_prob"])]
     return rows, segments

@@ -48,6 +48,12 @@ def right_actions(episode: Episode, navigator) -> np.ndarray:
     return right
 
 
+def executed_segments(episode: Episode) -> int:
+    """How many sub-goals the episode acted on: its segments of at least one step (those :func:`segment_facts`
+    describes; a plan replaced before its next operator's first step hands that operator to no one)."""
+    return sum((seg.end if seg.end is not None else episode.length) > seg.start for seg in episode.segments)
+
+
 def segment_facts(episode: Episode, navigator, fail_prob: float) -> list[dict]:
     """One row per executed sub-goal segment of a plan-following episode, with the optimal expected steps to
     achieve its operator from the segment's first state: d / (1 − fail_prob) for a shortest path of d moves

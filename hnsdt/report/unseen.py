@@ -140,12 +140,15 @@ def _split_table(table: pd.DataFrame) -> list[str]:
     return lines
 
 
-def experiment_contexts(params: Params, folder: Path) -> list[dict]:
+def experiment_contexts(params: Params, folder: Path, reference: Path | None = None) -> list[dict]:
     """The report's lines of each experiment of ``unseen_experiments``, from ``folder``/NAME/results: what it
     changes, its table (:func:`_split_table`) and HNSDT against the target (:func:`target_lines`); ``summary``
-    holds its summary table (the headline's line)."""
+    holds its summary table (the headline's line). An experiment whose planner hands out other operators than
+    the main experiment's (results at ``reference``) is set beside it by :func:`operators_table`."""
     from hnsdt.compose.config import layout_executor, unseen_experiment
 
+    main_operators = layout_executor(params, PROPOSED).operators
+    main_episodes = None
     out = []
     for name, changes in params.unseen_experiments.items():
         results = Path(folder) / name / "results"
@@ -154,13 +157,49 @@ def experiment_contexts(params: Params, folder: Path) -> list[dict]:
                                     f"(run `dvc repro unseen_experiment@{name}`)")
         mine = unseen_experiment(params, name)
         summ = pd.read_csv(results / "summary.csv")
+        operators = layout_executor(mine, PROPOSED).operators
+        beside = []
+        if reference is not None and operators != main_operators:
+            if main_episodes is None:
+                main_episodes = pd.read_csv(Path(reference) / "episodes.csv")
+            beside = operators_table(main_episodes, pd.read_csv(results / "episodes.csv"),
+                                     (main_operators, operators))
         written = {k: v if isinstance(v, str) else json.dumps(v) for k, v in changes.items()}  # as in YAML
         out.append({"name": name, "changes": ", ".join(f"`{k}: {v}`" for k, v in written.items()),
                     "family": mine.generalisation.family, "train": mine.generalisation.train_layouts,
-                    "seeds": trained_seeds(summ), "operators": layout_executor(mine, PROPOSED).operators,
+                    "seeds": trained_seeds(summ), "operators": operators,
                     "results": str(results / "summary.csv"), "table": "\n".join(_split_table(generalisation_table(summ))),
-                    "targets": target_lines(summ), "summary": summ})
+                    "targets": target_lines(summ), "summary": summ, "operators_table": "\n".join(beside),
+                    "reference_operators": OPERATOR_NAMES.get(main_operators, main_operators),
+                    "reference": str(Path(reference) / "episodes.csv") if reference is not None else ""})
     return out
+
+
+OPERATOR_NAMES = {"move": "Move", "goto": "GoTo"}
+
+
+def operators_table(reference: pd.DataFrame, other: pd.DataFrame, operators: tuple[str, str]) -> list[str]:
+    """HNSDT handed one operator set (``reference``'s episodes) beside another (``other``'s), on the splits whose
+    maps both evaluated: per split and fail_prob, success, sub-goals and the planner's calls per episode (means
+    over seeds and episodes) — what coarser sub-goals save the planner and cost the transformer. Empty where the
+    episodes carry no sub-goal counts or no split is shared."""
+    a, b = (d[d.method == PROPOSED] for d in (reference, other))
+    if not {"subgoals", "plans"} <= set(a.columns) & set(b.columns):
+        return []
+    splits = [s for s in dict.fromkeys(b.split)
+              if set(a.layout[a.split == s]) == set(b.layout[b.split == s])]
+    if not splits:
+        return []
+    names = [OPERATOR_NAMES.get(o, o) for o in operators]
+    head = [f"{n}: {h}" for n in names for h in ("success", "sub-goals / episode", "planner calls / episode")]
+    lines = ["| split | fail_prob | " + " | ".join(head) + " |", "|---|---|" + "---|" * len(head)]
+    for split in splits:
+        cells = [d[d.split == split].groupby("fail_prob")[["success", "subgoals", "plans"]].mean() for d in (a, b)]
+        for fp in cells[1].index:
+            values = [f"{fmt(c.success.get(fp))} | {fmt(c.subgoals.get(fp), '.1f')} | {fmt(c.plans.get(fp), '.1f')}"
+                      for c in cells]
+            lines.append(f"| {SPLIT_LABELS.get(split, split)} | {fp:g} | " + " | ".join(values) + " |")
+    return lines
 
 
 def generalisation_context(params: Params, results: Path, figure: Path) -> dict:

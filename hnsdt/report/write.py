@@ -76,7 +76,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             if not ablations.is_file():
                 raise FileNotFoundError(f"{ablations}: no measured variants (benchmarks/generalisation.py --record)")
             variants = ablation_context(ablations, tmp / "figures" / "scaling.png")
-        further = experiment_contexts(params, experiments) if experiments is not None and unseen else []
+        further = experiment_contexts(params, experiments, generalisation) if experiments is not None and unseen else []
         envs, methods = sorted(set(summ.env)), sorted(set(summ.method))
         rev, digest = git_revision(), params_digest(params)
         recorded = episodes[episodes.rrd != ""]
