@@ -103,6 +103,16 @@ def _metadata_written_once(ds: LeRobotDataset):
         write_stats(ds.meta.stats, ds.meta.root)
 
 
+@contextlib.contextmanager
+def lerobot_writing(ds: LeRobotDataset, features: dict):
+    """What we do to lerobot while it writes the episodes of ``ds``, each leaving the files lerobot alone writes
+    (docs/datasets.md): no image embedding without images, no fingerprints, the episode statistics on whole
+    arrays, the metadata written once."""
+    with (_skip_image_embedding(features), _skip_fingerprints(), vectorised_episode_stats(),
+          _metadata_written_once(ds)):
+        yield
+
+
 def write_dataset(root: str | Path, repo_id: str, layout: Layout | list[Layout], episodes: list[dict], fps: int,
                   meta: dict, card: dict, progress: bool = False, render_px: int = 0, view_radius: int = 0) -> Path:
     """Write ``episodes`` (dicts with states, actions, rewards, success, subgoal_ids, subgoal_targets, their
@@ -151,8 +161,7 @@ def write_frames(folder: Path, repo_id: str, layouts: list[Layout], episodes: li
             # Register the tasks in vocabulary order first, so task_index is the same on every run.
             used = sorted({int(i) for ep in episodes for i in ep["subgoal_ids"]})
             ds.meta.save_episode_tasks([ID_TO_NAME[i] for i in used])
-            with (_skip_image_embedding(features), _skip_fingerprints(), vectorised_episode_stats(),
-                  _metadata_written_once(ds)):
+            with lerobot_writing(ds, features):
                 for ep in tqdm(episodes, desc=desc, unit="episode", disable=not progress):
                     _add_episode(ds, ep, features, draw, view)
                     ds.save_episode()

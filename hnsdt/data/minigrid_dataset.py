@@ -95,9 +95,8 @@ def write_minigrid_dataset(root: str | Path, repo_id: str, episodes: list[dict],
     """``episodes`` (:func:`hnsdt.minigrid.collect.collect_episodes`) as a LeRobot dataset at ``root``, built in a
     temporary folder beside it and moved into place only when complete. ``meta``: env_id, world_seeds,
     fail_probs, epsilon, seed, license."""
-    from hnsdt.data.episode_stats import vectorised_episode_stats  # (lerobot takes seconds to import: only when
-    from hnsdt.data.lerobot_io import (LeRobotDataset, _metadata_written_once,  # writing, not in the learners'
-                                       _skip_fingerprints, _skip_image_embedding)  # processes, which read)
+    # (lerobot takes seconds to import: only when writing, not in the learners' processes, which read)
+    from hnsdt.data.lerobot_io import LeRobotDataset, lerobot_writing
 
     root = Path(root)
     if not episodes:
@@ -106,8 +105,7 @@ def write_minigrid_dataset(root: str | Path, repo_id: str, episodes: list[dict],
         ds = LeRobotDataset.create(repo_id, fps=fps, features=FEATURES, root=staging, use_videos=False)
         used = sorted({name for ep in episodes for name in ep["names"]})  # tasks first, sorted: same indices
         ds.meta.save_episode_tasks(used)
-        with (_skip_image_embedding(FEATURES), _skip_fingerprints(), vectorised_episode_stats(),
-              _metadata_written_once(ds)):
+        with lerobot_writing(ds, FEATURES):
             for ep in tqdm(episodes, desc=f"write {root.name}", unit="episode", disable=not progress):
                 for frame in _frames(ep):
                     ds.add_frame(frame)
