@@ -6,7 +6,7 @@ backups cut. `--drawn` scores the hand-drawn maps too: test maps, a diagnosis on
 
 Run: python benchmarks/plan_module.py [--family keydoor_maze] [--maps 8] [--steps 2000] [--lr 1e-2] [--batch 64]
      [--backup moves|kernel] [--goal target|learned] [--seed 0]
-     [--layouts 5] [--model CHECKPOINT_DIR] [--drawn] [--per-map] [--legs]
+     [--layouts 5] [--model CHECKPOINT_DIR] [--drawn] [--per-map] [--legs] [--no-block]
 Prints the training loss every 250 steps, then per split `all cells planned P (cut C); walk-away cells planned …`,
 and the time.
 """
@@ -46,6 +46,8 @@ def main() -> None:
     ap.add_argument("--per-map", action="store_true", help="also print each hand-drawn map's scores")
     ap.add_argument("--legs", action="store_true",
                     help="also score the key and door legs (maps with one key and one door), not only the exit")
+    ap.add_argument("--no-block", action="store_true",
+                    help="score with every cell relaying values (MapPlanner.block off: a wall as dear as its cost)")
     args = ap.parse_args()
     start = time.time()
     if args.model:
@@ -55,6 +57,7 @@ def main() -> None:
         module = train_alone(args.family, args.maps, args.steps, args.batch, args.lr, args.backup, args.seed,
                              log=print, goal=args.goal)
     module.eval()
+    module.block = not args.no_block
     splits = {"validation mazes": [generate(args.family, s) for s in range(VALIDATION_SEED,
                                                                            VALIDATION_SEED + args.layouts)]}
     if args.drawn:

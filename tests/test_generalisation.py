@@ -1118,6 +1118,14 @@ def test_a_folder_of_drawn_maps_is_checked_with_one_line_naming_the_problem(tmp_
     assert "2 of 3 maps cannot be used" in message and "nostart" in message and "walled" in message
     assert "fine" not in message.replace(str(tmp_path), "") and "\n" not in message
     assert [s.name for s in gen.drawn_layouts(REPO / "layouts/drawn", 100)][:2] == ["comb_12x15", "corridor_5x13"]
+    # a folder of folders: every map in them, in path order; one name in two folders is refused, naming it
+    every = [s.name for s in gen.drawn_layouts(REPO / "layouts", 100)]
+    assert every[:11] == [s.name for s in gen.drawn_layouts(REPO / "layouts/drawn", 100)]
+    assert every[11:] == [s.name for s in gen.drawn_layouts(REPO / "layouts/drawn_later", 100)] and len(every) > 11
+    (tmp_path / "bad/again").mkdir()
+    (tmp_path / "bad/again/fine.txt").write_text("@.a\n##A\n..G\n")
+    with pytest.raises(ValueError, match=r"bad: maps of the same name in two folders: fine$"):
+        gen.drawn_layouts(tmp_path / "bad", 100)
     path = tmp_path / "params.yaml"
     path.write_text(yaml.safe_dump(params))
     code = main(["--params", str(path), "generalisation", "evaluate", "--out", str(tmp_path / "r"),

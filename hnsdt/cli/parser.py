@@ -11,8 +11,9 @@ from hnsdt.core.methods import LEARNED
 
 
 def _drawn_arguments(p: argparse.ArgumentParser, action: str) -> None:
-    p.add_argument("--drawn", help=f"{action}: a folder of layout files (*.txt, maps of any shape with the family's "
-                   "keys and doors), the split `drawn` in place of generalisation.drawn's folder")
+    p.add_argument("--drawn", help=f"{action}: a folder of layout files (*.txt, and those of its folders: maps of "
+                   "any shape with the family's keys and doors), the split `drawn` in place of generalisation.drawn's "
+                   "folder")
     p.add_argument("--drawn-max-steps", type=int, default=250, help=f"{action}: the episode step limit on the "
                    "--drawn maps (default: 250)")
 

@@ -67,11 +67,17 @@ def validation_layouts(params: Params) -> list[Source]:
 
 
 def drawn_layouts(folder: str | Path, max_steps: int) -> list[Source]:
-    """Every layout file (``*.txt``) of ``folder``, named by its file name without ``.txt``, as the split
-    ``drawn``; a folder with bad maps is refused naming every one of them."""
-    files = sorted(Path(folder).glob("*.txt"))
+    """Every layout file (``*.txt``) of ``folder`` and the folders in it, in path order, named by its file name
+    without ``.txt`` (two files of one name are refused), as the split ``drawn``; a folder with bad maps is
+    refused naming every one of them."""
+    files = sorted(Path(folder).rglob("*.txt"))
     if not files:
         raise ValueError(f"generalisation.drawn.folder {folder}: no layout files (*.txt) there")
+    names = [f.stem for f in files]
+    twice = sorted({n for n in names if names.count(n) > 1})
+    if twice:
+        raise ValueError(f"generalisation.drawn.folder {folder}: maps of the same name in two folders: "
+                         + ", ".join(twice))
     out, bad = [], []
     for f in files:
         try:

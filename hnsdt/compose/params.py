@@ -183,7 +183,8 @@ class MiniGridSource(Section):
 
 
 class DrawnSource(Section):
-    folder: str = Field(description="a folder of layout files (*.txt), e.g. hand-drawn maps")
+    folder: str = Field(description="a folder of layout files (*.txt), e.g. hand-drawn maps, and those of the "
+                                    "folders in it")
     max_steps: PositiveInt = Field(description="episode step limit on these maps")
 
 

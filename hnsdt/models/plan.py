@@ -10,7 +10,10 @@ Two backups (``backup``):
   values start at the sub-goal's target cell (``goal="target"``, the default: the cell the planner's operator
   names, as VIN's and GPPN's goal map) and a cell's value is its best neighbour's less its step cost. The
   transition is the environment's (a move reaches one of four neighbours); what is learned is which cells are
-  cheap to cross in this state (floor, a door the flags open). A step without a target (a DT without sub-goals)
+  cheap to cross in this state (floor, a door the flags open). A cell whose learned cost is above ``LOWEST``
+  (the read-out's wall) relays no value (``block``): it is a wall to the plan, whatever the detour round it
+  costs — learned costs alone make a wall only as dear as the training maps' detours, so on a larger map a
+  long way round lost to a way through the wall (docs/unseen-layouts-studies.md). A step without a target (a DT without sub-goals)
   starts from each cell's learned goal value instead — its log-probability of being the goal — as does every
   step with ``goal="learned"``. The read-out is the four neighbours' values less the agent's: no distance or
   direction is an input or a target, and with the backups cut the read-out points a shortest way from about a
@@ -65,12 +68,12 @@ class MapPlanner(nn.Module):
     numbers)."""
 
     def __init__(self, code_dim: int, n_flags: int, channels: int = 8, hidden: int = 32, backup: str = "moves",
-                 goal: str = "target"):
+                 goal: str = "target", block: bool = True):
         super().__init__()
         for name, value, allowed in (("backup", backup, BACKUPS), ("goal", goal, GOALS)):
             if value not in allowed:
                 raise ValueError(f"{name} {value!r} is not one of {', '.join(allowed)}")
-        self.n_flags, self.backup, self.goal = n_flags, backup, goal
+        self.n_flags, self.backup, self.goal, self.block = n_flags, backup, goal, block
         self.code_emb = nn.Embedding(N_CODES, code_dim)  # its own: the view's embedding learns at another pace
         outputs = 1 if backup == "kernel" else 2  # (moves: a step's cost and the goal's log-value per cell)
         self.reward = nn.Sequential(nn.Conv2d(code_dim + 1 + n_flags, hidden, 1), nn.ReLU(),
@@ -97,7 +100,7 @@ class MapPlanner(nn.Module):
     def plan(self, cells: torch.Tensor, mark: torch.Tensor, flags: torch.Tensor, backups: int | None = None
              ) -> tuple[torch.Tensor, torch.Tensor]:
         """cells (N, code_dim, S, S), mark (N, 1, S, S), flags (N, n_flags) → what the read-out needs besides
-        the values — ``moves``: each cell's goal value (N, 1, S, S); ``kernel``: the action values its reward
+        the values — ``moves``: each cell's goal value and step cost (N, 2, S, S); ``kernel``: the action values its reward
         gives (N, channels, S, S) — and the values after the backups (N, 1, S, S). ``backups``: at most that
         many instead of side² (0: each cell's own values, nothing planned)."""
         side = cells.shape[-1]
@@ -116,22 +119,24 @@ class MapPlanner(nn.Module):
     def _plan_moves(self, reward: torch.Tensor, mark: torch.Tensor, backups: int) -> tuple[torch.Tensor, torch.Tensor]:
         """Backups over the four moves: a cell's value is the larger of its goal value (``goal="target"`` and a
         marked cell: 0 there, -1e9 elsewhere; else its learned log-probability of being the goal) and its best
-        neighbour's less the cell's learned step cost (> 0); stops once nothing changes (at most ``backups``)."""
+        neighbour's less the cell's learned step cost (> 0), none through a cell dearer than ``LOWEST`` (``block``);
+        stops once nothing changes (at most ``backups``)."""
         cost = F.softplus(reward[:, :1])
         goal = F.logsigmoid(reward[:, 1:])
         if self.goal == "target":
             marked = mark.flatten(1).amax(dim=1)[:, None, None, None] > 0
             goal = torch.where(marked, torch.where(mark > 0, 0.0, -1e9), goal)
+        walls = cost > LOWEST if self.block else torch.zeros_like(cost, dtype=torch.bool)
         value = goal
         for _ in range(backups):
             padded = F.pad(value[:, 0], (1, 1, 1, 1), value=-1e9)
             best = torch.stack([padded[:, :-2, 1:-1], padded[:, 2:, 1:-1], padded[:, 1:-1, :-2],
                                 padded[:, 1:-1, 2:]]).max(dim=0).values
-            new = torch.maximum(goal, best[:, None] - cost)
+            new = torch.maximum(goal, torch.where(walls, -1e9, best[:, None] - cost))
             if torch.equal(new, value):
                 break
             value = new
-        return goal, value
+        return torch.cat([goal, cost.masked_fill(~walls, 0.0)], dim=1), value
 
     def read(self, q_reward: torch.Tensor, value: torch.Tensor, segment: torch.Tensor, cells: torch.Tensor
              ) -> torch.Tensor:
@@ -140,7 +145,11 @@ class MapPlanner(nn.Module):
         padded = F.pad(value[:, 0], (1, 1, 1, 1), value=-1e9 if self.backup == "moves" else 0.0)
         around = torch.stack([padded[segment, r + i, c + j] for i in range(3) for j in range(3)], dim=-1)  # (M, 9)
         if self.backup == "moves":  # (beyond the edge: a wall's lowest value, not -1e9)
-            return (around[:, [1, 7, 3, 5]] - around[:, 4:5]).clamp(min=-LOWEST)
+            near = around[:, [1, 7, 3, 5]]
+            here = around[:, 4:5]
+            wall = q_reward[segment, 1, r, c][:, None]  # (> 0: the agent's cell relays nothing, -1e9 in the plan)
+            own = torch.maximum(q_reward[segment, 0, r, c][:, None], near.max(dim=-1, keepdim=True).values - wall)
+            return (near - torch.where(wall > 0, own, here)).clamp(min=-LOWEST)  # (its own value as a cell's)
         q = q_reward[segment, :, r, c] + around @ self.kernel().T
         near = around[:, [1, 7, 3, 5]] - around[:, 4:5]  # up, down, left, right, relative to the agent's cell
         return torch.cat([q - q.max(dim=-1, keepdim=True).values, near], dim=-1)

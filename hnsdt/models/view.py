@@ -84,7 +84,7 @@ class ViewEncoder(nn.Module):
     def __init__(self, radius: int, code_dim: int, n_flags: int, width: int, conv_layers: int = 0,
                  conv_channels: int = 32, value_iterations: int = 0, value_channels: int = 8,
                  whole_map: bool = False, plan_channels: int = 8, plan_backup: str = "moves",
-                 plan_goal: str = "target"):
+                 plan_goal: str = "target", plan_block: bool = True):
         super().__init__()
         self.radius, self.n_flags = radius, n_flags
         self.code_emb = nn.Embedding(N_CODES, code_dim)
@@ -103,7 +103,8 @@ class ViewEncoder(nn.Module):
         self.flag_proj = Linear(max(n_flags, 1), width, bias=False)
         self.map_plan = None
         if whole_map:
-            self.map_plan = MapPlanner(code_dim, n_flags, plan_channels, backup=plan_backup, goal=plan_goal)
+            self.map_plan = MapPlanner(code_dim, n_flags, plan_channels, backup=plan_backup, goal=plan_goal,
+                                       block=plan_block)
             self.plan_proj = Linear(self.map_plan.out_features, width, bias=False)
 
     def forward(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
@@ -275,6 +276,8 @@ class ViewDTConfig(DTConfig):
     plan_goal: str = "target"  # (moves) where its values start: the sub-goal's target cell ("target"; a step
     #                            without one, or a DT without sub-goals: each cell's learned goal value) or always
     #                            each cell's learned goal value ("learned")
+    plan_block: bool = True  # (moves) a cell whose learned step cost is above the read-out's wall relays no value
+    #                          (False: every cell relays, a wall only as dear as its learned cost)
     plan_channels: int = 8  # (kernel) its action values per cell
     plan_loss: float = 1.0  # weight of the module's own imitation loss beside the transformer's (0: end to end
     #                         through the transformer only)
@@ -305,7 +308,7 @@ class ViewDecisionTransformer(ViewModel, DecisionTransformer, arch="view_decisio
         cfg = self.cfg
         self.view = ViewEncoder(cfg.view_radius, cfg.code_dim, cfg.n_flags, width, cfg.conv_layers,
                                 cfg.conv_channels, cfg.value_iterations, cfg.value_channels, cfg.whole_map,
-                                cfg.plan_channels, cfg.plan_backup, cfg.plan_goal)
+                                cfg.plan_channels, cfg.plan_backup, cfg.plan_goal, cfg.plan_block)
 
     def embed_states(self, states: torch.Tensor, targets: torch.Tensor | None = None) -> torch.Tensor:
         return self.view(states, targets)
