@@ -1364,10 +1364,10 @@ def test_first_attempts_keep_each_episodes_segments_up_to_its_first_failure():
     assert sorted(zip(kept.episode, kept.start, kept.leg)) == [(0, 0, 0), (0, 5, 1), (1, 0, 0), (1, 4, 1)]
 
 
-def test_operators_are_compared_on_the_splits_where_both_evaluated_the_same_maps():
-    """The report sets HNSDT's episodes under one operator set beside another's only on splits whose maps are the
-    same in both (a held-out split of another family is not), with each side's success, sub-goals and planner
-    calls per episode at each fail_prob."""
+def test_operators_are_compared_on_the_maps_both_evaluated():
+    """The report sets HNSDT's episodes under one operator set beside another's only on the maps both evaluated
+    (none of a held-out split of another family; the shared ones of a split one of them evaluated more maps of,
+    saying how many), with each side's success, sub-goals and planner calls per episode at each fail_prob."""
     import pandas as pd
 
     from hnsdt.report.unseen import operators_table
@@ -1377,11 +1377,14 @@ def test_operators_are_compared_on_the_splits_where_both_evaluated_the_same_maps
                               "subgoals": subgoals, "plans": plans}
                              for split, maps in split_maps.items() for m in maps for fp in (0.0, 0.3)])
 
-    move = episodes({"heldout": ["maze-1"], "drawn": ["spiral", "comb"]}, 12, 1)
-    goto = episodes({"heldout": ["mazes-1"], "drawn": ["spiral", "comb"]}, 5, 2)
+    move = episodes({"heldout": ["maze-1"], "drawn": ["spiral", "comb"], "minigrid": ["dk-0", "dk-1"]}, 12, 1)
+    goto = episodes({"heldout": ["mazes-1"], "drawn": ["spiral", "comb", "big"], "minigrid": ["dk-0", "dk-1"]}, 5, 2)
+    goto.loc[goto.layout == "big", ["subgoals", "plans"]] = [50, 9]  # (a map Move never saw: not in the means)
     lines = operators_table(move, goto, ("move", "goto"))
     assert lines[0] == ("| split | fail_prob | Move: success | Move: sub-goals / episode | Move: planner calls / "
                         "episode | GoTo: success | GoTo: sub-goals / episode | GoTo: planner calls / episode |")
-    assert lines[2:] == ["| hand-drawn maps | 0 | 1.000 | 12.0 | 1.0 | 1.000 | 5.0 | 2.0 |",
-                         "| hand-drawn maps | 0.3 | 1.000 | 12.0 | 1.0 | 1.000 | 5.0 | 2.0 |"]
+    assert lines[2:] == ["| hand-drawn maps (the 2 maps of both) | 0 | 1.000 | 12.0 | 1.0 | 1.000 | 5.0 | 2.0 |",
+                         "| hand-drawn maps (the 2 maps of both) | 0.3 | 1.000 | 12.0 | 1.0 | 1.000 | 5.0 | 2.0 |",
+                         "| MiniGrid grids | 0 | 1.000 | 12.0 | 1.0 | 1.000 | 5.0 | 2.0 |",
+                         "| MiniGrid grids | 0.3 | 1.000 | 12.0 | 1.0 | 1.000 | 5.0 | 2.0 |"]
     assert operators_table(move.drop(columns="plans"), goto, ("move", "goto")) == []

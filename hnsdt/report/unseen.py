@@ -179,27 +179,32 @@ OPERATOR_NAMES = {"move": "Move", "goto": "GoTo"}
 
 
 def operators_table(reference: pd.DataFrame, other: pd.DataFrame, operators: tuple[str, str]) -> list[str]:
-    """HNSDT handed one operator set (``reference``'s episodes) beside another (``other``'s), on the splits whose
-    maps both evaluated: per split and fail_prob, success, sub-goals and the planner's calls per episode (means
-    over seeds and episodes) — what coarser sub-goals save the planner and cost the transformer. Empty where the
-    episodes carry no sub-goal counts or no split is shared."""
+    """HNSDT handed one operator set (``reference``'s episodes) beside another (``other``'s), on the maps both
+    evaluated in a split (a split where one evaluated maps the other did not says how many are shared): per
+    split and fail_prob, success, sub-goals and the planner's calls per episode (means over seeds and episodes)
+    — what coarser sub-goals save the planner and cost the transformer. Empty where the episodes carry no
+    sub-goal counts or no map is shared."""
     a, b = (d[d.method == PROPOSED] for d in (reference, other))
     if not {"subgoals", "plans"} <= set(a.columns) & set(b.columns):
         return []
-    splits = [s for s in dict.fromkeys(b.split)
-              if set(a.layout[a.split == s]) == set(b.layout[b.split == s])]
-    if not splits:
-        return []
     names = [OPERATOR_NAMES.get(o, o) for o in operators]
     head = [f"{n}: {h}" for n in names for h in ("success", "sub-goals / episode", "planner calls / episode")]
-    lines = ["| split | fail_prob | " + " | ".join(head) + " |", "|---|---|" + "---|" * len(head)]
-    for split in splits:
-        cells = [d[d.split == split].groupby("fail_prob")[["success", "subgoals", "plans"]].mean() for d in (a, b)]
+    lines = []
+    for split in dict.fromkeys(b.split):
+        maps = [set(d.layout[d.split == split]) for d in (a, b)]
+        shared = maps[0] & maps[1]
+        if not shared:
+            continue
+        name = SPLIT_LABELS.get(split, split) + ("" if maps[0] == maps[1] else f" (the {len(shared)} maps of both)")
+        cells = [d[(d.split == split) & d.layout.isin(shared)].groupby("fail_prob")[["success", "subgoals", "plans"]]
+                 .mean() for d in (a, b)]
         for fp in cells[1].index:
             values = [f"{fmt(c.success.get(fp))} | {fmt(c.subgoals.get(fp), '.1f')} | {fmt(c.plans.get(fp), '.1f')}"
                       for c in cells]
-            lines.append(f"| {SPLIT_LABELS.get(split, split)} | {fp:g} | " + " | ".join(values) + " |")
-    return lines
+            lines.append(f"| {name} | {fp:g} | " + " | ".join(values) + " |")
+    if not lines:
+        return []
+    return ["| split | fail_prob | " + " | ".join(head) + " |", "|---|---|" + "---|" * len(head)] + lines
 
 
 def generalisation_context(params: Params, results: Path, figure: Path) -> dict:
