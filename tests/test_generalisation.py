@@ -879,7 +879,7 @@ def test_our_arm_plans_over_the_experiments_operators_and_learns_their_labels(tm
 
 def test_no_two_splits_share_a_map_and_validation_is_never_evaluated():
     """The default experiment's training, validation, held-out, MiniGrid and hand-drawn maps are pairwise
-    distinct grids, and the four maps drawn after every choice (``layouts/drawn_later``) are none of them; a generated
+    distinct grids, and the seven maps drawn after every choice (``layouts/drawn_later``) are none of them; a generated
     grid already in an earlier split is skipped, not reused."""
     from hnsdt.compose import generalisation as gen
     from hnsdt.compose.config import load_params
@@ -894,7 +894,7 @@ def test_no_two_splits_share_a_map_and_validation_is_never_evaluated():
     texts = [s.layout.text for s in evaluated + validation]
     assert len(set(texts)) == len(texts)
     later = gen.drawn_layouts(REPO / "layouts/drawn_later", g.drawn.max_steps)  # (checked usable as they load)
-    assert len(later) == 4 and not {s.layout.text for s in later} & set(texts)
+    assert len(later) == 7 and not {s.layout.text for s in later} & set(texts)
     first = generate(g.family, gen.VALIDATION_SEED)
     seen = [gen.Source("train", first, 10)]
     assert gen._unseen(params, "validation", gen.VALIDATION_SEED, 1, seen)[0].layout == generate(
