@@ -13,11 +13,11 @@ Two backups (``backup``):
   cheap to cross in this state (floor, a door the flags open). A cell whose learned cost is above ``LOWEST``
   (the read-out's wall) relays no value (``block``): it is a wall to the plan, whatever the detour round it
   costs — learned costs alone make a wall only as dear as the training maps' detours, so on a larger map a
-  long way round lost to a way through the wall (docs/unseen-layouts-studies.md). A step without a target (a DT without sub-goals)
-  starts from each cell's learned goal value instead — its log-probability of being the goal — as does every
-  step with ``goal="learned"``. The read-out is the four neighbours' values less the agent's: no distance or
-  direction is an input or a target, and with the backups cut the read-out points a shortest way from about a
-  third of the cells.
+  long way round lost to a way through the wall (docs/unseen-layouts-studies.md). A step without a target (a
+  DT without sub-goals) starts from each cell's learned goal value instead — its log-probability of being the
+  goal — as does every step with ``goal="learned"``. The read-out is the four neighbours' values less the
+  agent's: no distance or direction is an input or a target, and with the backups cut the read-out points a
+  shortest way from about a third of the cells.
 * ``kernel``: VIN's (Tamar et al. 2016): ``channels`` action values per cell, each the cell's reward plus a
   learned 3 × 3 kernel's sum of the neighbours' values, the value their maximum; read out as the agent's action
   values and its neighbours' values. Measured not to learn to plan from our demonstrations (its actions a
@@ -100,9 +100,10 @@ class MapPlanner(nn.Module):
     def plan(self, cells: torch.Tensor, mark: torch.Tensor, flags: torch.Tensor, backups: int | None = None
              ) -> tuple[torch.Tensor, torch.Tensor]:
         """cells (N, code_dim, S, S), mark (N, 1, S, S), flags (N, n_flags) → what the read-out needs besides
-        the values — ``moves``: each cell's goal value and step cost (N, 2, S, S); ``kernel``: the action values its reward
-        gives (N, channels, S, S) — and the values after the backups (N, 1, S, S). ``backups``: at most that
-        many instead of side² (0: each cell's own values, nothing planned)."""
+        the values — ``moves``: each cell's goal value and, where it relays nothing, its step cost (N, 2, S, S);
+        ``kernel``: the action values its reward gives (N, channels, S, S) — and the values after the backups
+        (N, 1, S, S). ``backups``: at most that many instead of side² (0: each cell's own values, nothing
+        planned)."""
         side = cells.shape[-1]
         backups = self.iterations(side) if backups is None else backups
         spread = flags[:, :self.n_flags, None, None].expand(-1, -1, side, side)
