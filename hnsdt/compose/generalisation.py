@@ -10,6 +10,7 @@ named by its generator and seed, its MiniGrid id and seed, or (drawn) its file's
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -73,8 +74,7 @@ def drawn_layouts(folder: str | Path, max_steps: int) -> list[Source]:
     files = sorted(Path(folder).rglob("*.txt"))
     if not files:
         raise ValueError(f"generalisation.drawn.folder {folder}: no layout files (*.txt) there")
-    names = [f.stem for f in files]
-    twice = sorted({n for n in names if names.count(n) > 1})
+    twice = sorted(name for name, n in Counter(f.stem for f in files).items() if n > 1)
     if twice:
         raise ValueError(f"generalisation.drawn.folder {folder}: maps of the same name in two folders: "
                          + ", ".join(twice))

@@ -48,10 +48,16 @@ def right_actions(episode: Episode, navigator) -> np.ndarray:
     return right
 
 
+def _executed(episode: Episode) -> list[tuple]:
+    """(segment, end step) of each sub-goal the episode acted on: its segments of at least one step (a plan
+    replaced before its next operator's first step hands that operator to no one)."""
+    ends = ((seg, seg.end if seg.end is not None else episode.length) for seg in episode.segments)
+    return [(seg, end) for seg, end in ends if end > seg.start]
+
+
 def executed_segments(episode: Episode) -> int:
-    """How many sub-goals the episode acted on: its segments of at least one step (those :func:`segment_facts`
-    describes; a plan replaced before its next operator's first step hands that operator to no one)."""
-    return sum((seg.end if seg.end is not None else episode.length) > seg.start for seg in episode.segments)
+    """How many sub-goals the episode acted on (the segments :func:`segment_facts` describes)."""
+    return len(_executed(episode))
 
 
 def segment_facts(episode: Episode, navigator, fail_prob: float) -> list[dict]:
@@ -63,10 +69,7 @@ def segment_facts(episode: Episode, navigator, fail_prob: float) -> list[dict]:
     rows = []
     lay = navigator.layout
     right = right_actions(episode, navigator)
-    for seg in episode.segments:
-        end = seg.end if seg.end is not None else episode.length
-        if end <= seg.start:
-            continue
+    for seg, end in _executed(episode):
         state = episode.states[seg.start]
         target = tuple(int(v) for v in episode.subgoal_targets[seg.start])
         if seg.operator.startswith("Move"):
