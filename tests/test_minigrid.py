@@ -257,7 +257,8 @@ def test_without_drop_the_carrying_worlds_have_no_plan(monkeypatch):
                                     "MiniGrid-KeyCorridorS3R1-v0", "MiniGrid-BlockedUnlockPickup-v0"])
 def test_the_symbolic_agent_solves_minigrid_worlds_in_minigrids_own_env(env_id):
     """Planner + controllers, played in MiniGrid's env: every world solved with and without failures, never
-    faster than the exact optimum, at fail_prob 0 within 1.3 times its steps (the planner does not count turns)."""
+    faster than the exact optimum, at fail_prob 0 within 1.3 times its steps (the planner does not count turns
+    and puts a carried object down where its controller finds room)."""
     from hnsdt.minigrid.controllers import symbolic_episode
 
     for seed in range(3):
@@ -266,28 +267,6 @@ def test_the_symbolic_agent_solves_minigrid_worlds_in_minigrids_own_env(env_id):
         if env_id != "MiniGrid-BlockedUnlockPickup-v0":  # (its optimum takes 10 s a world)
             best = WorldMDP(world_of(env_id, seed)).solve(0.0)[0].steps
             assert best <= calm.steps <= 1.3 * best
-
-
-def test_the_key_goes_down_on_the_way_where_the_walk_turns(monkeypatch):
-    """UnlockPickup's key is put down on the way to the box, in front of the agent where its way turns (as the
-    optimum does), not by turning, dropping and turning back where the door was opened: over six worlds the
-    symbolic agent is within 1.05 times the optimum's steps, and the frames of that Drop name the box as their
-    target. Cut the on-the-way drop and it walks 1.10 times the optimum."""
-    from hnsdt.minigrid import controllers
-    from hnsdt.minigrid.collect import SUBGOAL_NAMES, noisy_episode
-    from hnsdt.minigrid.controllers import symbolic_episode
-    from minigrid.core.constants import OBJECT_TO_IDX
-
-    env_id = "MiniGrid-UnlockPickup-v0"
-    seeds = range(100000, 100006)
-    best = sum(WorldMDP(world_of(env_id, s)).solve(0.0)[0].steps for s in seeds)
-    assert sum(symbolic_episode(env_id, s).steps for s in seeds) <= 1.05 * best
-    ep = noisy_episode(env_id, 100000, 0.0, 0, 0.0, np.random.default_rng(0))
-    dropping = ep["subgoals"] == SUBGOAL_NAMES.index("drop")
-    assert ep["success"] and dropping.sum() > 1  # (walks on under its Drop, then drops)
-    assert (ep["objects"][dropping, 0] == OBJECT_TO_IDX["box"]).all()
-    monkeypatch.setattr(controllers, "heading", lambda plan: None)
-    assert sum(symbolic_episode(env_id, s).steps for s in seeds) >= 1.08 * best
 
 
 @pytest.mark.parametrize("env_id", ["MiniGrid-DoorKey-8x8-v0", "MiniGrid-Unlock-v0", "MiniGrid-UnlockPickup-v0",

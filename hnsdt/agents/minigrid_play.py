@@ -24,7 +24,7 @@ import numpy as np
 import torch
 
 from hnsdt.minigrid.collect import state_vector, subgoal_of
-from hnsdt.minigrid.controllers import SymbolicAgent, heading
+from hnsdt.minigrid.controllers import SymbolicAgent
 from hnsdt.minigrid.live import Episode, GaveUp, Step, carried_name, close_trace, make_env, read_world, snapshot
 from hnsdt.minigrid.operators import PlanState
 from hnsdt.baselines.online import sample_categorical
@@ -180,7 +180,7 @@ def play(model: MiniGridDT | MiniGridRecurrent | MiniGridActorCritic | MiniGridQ
                     done[i] = Episode(False, g.steps, 0.0, g.planner.plans, str(exc)[:200])
                     close_trace(traces.get(i), g.env, g.world, s)
                     continue
-                kind, target = subgoal_of(g.world, op, heading(g.planner.plan) if subgoals else None)
+                kind, target = subgoal_of(g.world, op)
                 rows.append(i)
                 states.append(step_states(state_vector(g.world, s), g.obs["image"]))
                 kinds.append(kind)

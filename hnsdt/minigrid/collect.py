@@ -16,7 +16,7 @@ from collections.abc import Iterable
 
 import numpy as np
 
-from hnsdt.minigrid.controllers import SymbolicAgent, heading
+from hnsdt.minigrid.controllers import SymbolicAgent
 from hnsdt.minigrid.live import GaveUp, make_env, read_world, snapshot
 from hnsdt.minigrid.operators import DROP, GOTO_GOAL, GOTO_DOOR, KINDS, OPEN_IT, Operator
 from hnsdt.minigrid.world import Actions, World, WorldState
@@ -51,13 +51,11 @@ def state_vector(world: World, s: WorldState) -> list[int]:
     return [*s.cell, s.direction, *(_indices(carried.kind, carried.color) if carried else (0, 0))]
 
 
-def subgoal_of(world: World, op: Operator | None, then: Operator | None = None) -> tuple[int, list[int]]:
+def subgoal_of(world: World, op: Operator | None) -> tuple[int, list[int]]:
     """A frame's sub-goal: its kind's index in :data:`SUBGOAL_NAMES` and ``(row, col, type, colour)``, its target
-    cell (-1, -1: none) and its object (:func:`subgoal_object`). A Drop done on the way to ``then``'s cell (the
-    plan's next walk, :func:`~hnsdt.minigrid.controllers.heading`) has that walk's target and object."""
-    aim = then if op is not None and op.kind == DROP and then is not None else op
+    cell (-1, -1: none) and its object (:func:`subgoal_object`)."""
     return (SUBGOAL_NAMES.index(op.kind) if op else 0,
-            [*(aim.cell if aim else (-1, -1)), *subgoal_object(world, aim)])
+            [*(op.cell if op else (-1, -1)), *subgoal_object(world, op)])
 
 
 def noisy_episode(env_id: str, seed: int, fail_prob: float, failure_seed: int, epsilon: float,
@@ -79,7 +77,7 @@ def noisy_episode(env_id: str, seed: int, fail_prob: float, failure_seed: int, e
                 break
             op = agent.plan[0] if agent.plan else None
             action = int(rng.choice(RANDOM_ACTIONS)) if rng.random() < epsilon else planned
-            kind, target = subgoal_of(world, op, heading(agent.plan))
+            kind, target = subgoal_of(world, op)
             ep["views"].append(np.asarray(obs["image"], np.int64).reshape(-1))
             ep["states"].append(state_vector(world, s))
             ep["actions"].append(action)

@@ -4,11 +4,8 @@
 * GoTo: the first action of a shortest turn / forward sequence onto the operator's cell (a breadth-first search
   over cell and direction, stepped by :meth:`World.step`);
 * PickUp, Open: turn to face the object or door, then pickup / toggle;
-* Drop: when the plan walks on after it, the first action of a shortest left / right / forward / drop sequence that
-  puts the object down and ends where that walk ends, hands free (:func:`drop_on_the_way`): the object goes down
-  in front of the agent where its way turns, as the optimum does, rather than by a turn, a drop and a turn back
-  where it stands; else (or with no such way) turn to face an empty cell beside the agent, then drop. Either way
-  the object goes onto a cell beside no door (when there is one), so that it does not block a doorway.
+* Drop: turn to face an empty cell beside the agent — one not beside a door when there is one, so the object does
+  not block a doorway — then drop.
 
 A controller that cannot act (no way, nowhere to put the object) makes the agent replan; a plan whose first
 operator its controller still cannot act on means the agent gives up rather than replan for ever.
@@ -69,42 +66,8 @@ def drop_cell(world: World, s: WorldState) -> Cell | None:
     return min(empty, key=lambda c: (any(beside(c, d.cell) for d in world.doors), c != front))
 
 
-def drop_on_the_way(world: World, s: WorldState, target: Cell) -> int | None:
-    """The first action of a shortest left / right / forward / drop sequence from ``s`` that puts the carried
-    object down on a cell beside no door and ends on ``target`` with hands free (ties: left, right, forward, drop),
-    or None when there is none."""
-    first: dict[WorldState, int | None] = {s: None}
-    queue = deque([s])
-    while queue:
-        cur = queue.popleft()
-        for a in (Actions.left, Actions.right, Actions.forward, Actions.drop):
-            if a == Actions.drop:
-                if cur.carrying < 0:
-                    continue
-                dr, dc = DIRECTIONS[cur.direction]
-                if any(beside((cur.cell[0] + dr, cur.cell[1] + dc), d.cell) for d in world.doors):
-                    continue
-            nxt, success = world.step(cur, a)
-            if nxt in first:
-                continue
-            first[nxt] = first[cur] if cur is not s else int(a)
-            if nxt.carrying < 0 and nxt.cell == target:
-                return first[nxt]
-            if not success:
-                queue.append(nxt)
-    return None
-
-
-def heading(plan: list[Operator]) -> Operator | None:
-    """The walk a Drop at the plan's head is done on the way to: the next operator when it is a walk."""
-    if len(plan) > 1 and plan[0].kind == DROP and plan[1].kind in WALKS:
-        return plan[1]
-    return None
-
-
-def controller(world: World, s: WorldState, op: Operator, then: Operator | None = None) -> int | None:
-    """The next low-level action for ``op`` in ``s`` (None: the controller cannot do it from here); ``then``: the
-    walk after a Drop (:func:`heading`)."""
+def controller(world: World, s: WorldState, op: Operator) -> int | None:
+    """The next low-level action for ``op`` in ``s`` (None: the controller cannot do it from here)."""
     if op.kind in WALKS:
         return walk(world, s, op.cell)
     if op.kind in (PICKUP, OPEN_IT):
@@ -112,10 +75,6 @@ def controller(world: World, s: WorldState, op: Operator, then: Operator | None 
             return None
         turn = face(s, op.cell)
         return turn if turn is not None else int(Actions.pickup if op.kind == PICKUP else Actions.toggle)
-    if then is not None:
-        action = drop_on_the_way(world, s, then.cell)
-        if action is not None:
-            return action
     target = drop_cell(world, s)
     if target is None:
         return None
@@ -134,7 +93,7 @@ def possible(world: World, op: Operator, s: PlanState) -> bool:
         key = world.objects[s.carrying] if s.carrying >= 0 else None
         return (state != OPEN and beside(s.cell, op.cell)
                 and (state != LOCKED or (key is not None and key.kind == "key" and key.color == door.color)))
-    return op.kind == DROP and s.carrying >= 0  # (on the way: its controller says whether it can)
+    return op.kind == DROP and s.carrying >= 0 and bool(empty_beside(world, s.cell, s.objects))
 
 
 class SymbolicAgent:
@@ -161,10 +120,10 @@ class SymbolicAgent:
 
     def act(self, s: WorldState) -> int:
         ps = PlanState.of(s)
-        action = controller(self.world, s, self.plan[0], heading(self.plan)) if self.advance(ps) else None
+        action = controller(self.world, s, self.plan[0]) if self.advance(ps) else None
         if action is None:
             self.replan(ps)
-            action = controller(self.world, s, self.plan[0], heading(self.plan)) if self.plan else int(Actions.done)
+            action = controller(self.world, s, self.plan[0]) if self.plan else int(Actions.done)
             if action is None:
                 raise GaveUp(f"{self.world.name}: the controller of {self.plan[0].name(self.world)} cannot act")
         return action
