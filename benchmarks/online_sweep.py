@@ -78,14 +78,22 @@ def main() -> None:
     print(f"\n{time.perf_counter() - start:.0f} s for {len(jobs)} stacks; written {args.out}")
     for method, part in table.groupby("method", sort=False):
         knobs = [k for k in ("lr", "exploration_fraction", "ent_coef") if part[k].notna().any()]
-        scores = part.groupby(knobs).agg(ratio=("ratio", "mean"), best_step=("best_step", "mean")).reset_index()
-        scores["current"] = [all(row[k] == current[method][k] for k in knobs) for _, row in scores.iterrows()]
-        scores = scores.sort_values(["ratio", "best_step", "current"], ascending=[True, True, False])
         print(f"\n{method}: mean steps over the optimum's (lower is better), mean env steps to the kept evaluation")
-        print(scores.to_string(index=False))
-        chosen = scores.iloc[0]
-        print(f"chosen: {', '.join(f'{k} {chosen[k]:g}' for k in knobs)}"
-              f"{' (the current setting)' if chosen['current'] else ''}")
+        choose(part, knobs, current[method], "ratio", "best_step")
+
+
+def choose(runs, knobs: list[str], current: dict, score: str, tie: str, shown: tuple[str, ...] = ()):
+    """One learner's setting: the lowest mean ``score`` over its runs, then the lowest mean ``tie``, the current
+    setting winning a tie with others. Prints every setting's means (with ``shown``'s) and the choice."""
+    columns = dict.fromkeys((score, tie, *shown))
+    scores = runs.groupby(knobs).agg(**{c: (c, "mean") for c in columns}).reset_index()
+    scores["current"] = [all(row[k] == current[k] for k in knobs) for _, row in scores.iterrows()]
+    scores = scores.sort_values([score, tie, "current"], ascending=[True, True, False])
+    print(scores.to_string(index=False))
+    chosen = scores.iloc[0]
+    print(f"chosen: {', '.join(f'{k} {chosen[k]:g}' for k in knobs)}"
+          f"{' (the current setting)' if chosen['current'] else ''}")
+    return chosen
 
 
 if __name__ == "__main__":
