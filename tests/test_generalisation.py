@@ -1344,6 +1344,27 @@ def _benchmark(name: str):
     return module
 
 
+def test_a_sweep_chooses_the_lowest_score_then_the_tie_and_the_current_setting_wins_a_tie(monkeypatch, capsys):
+    """The knob sweeps' rule (benchmarks/online_sweep.py, offline_sweep.py): the lowest mean score over a setting's
+    runs, then the lowest mean tie-breaker, the current setting winning a full tie; the offline sweep scores a
+    fixed-epoch learner (the LSTM, the GRU) by its last epoch, which the default keeps, and a transformer by its
+    plateau's best."""
+    import pandas as pd
+
+    choose = _benchmark("online_sweep").choose
+    runs = pd.DataFrame({"lr": [1, 1, 2, 2, 3, 3], "ratio": [1.0, 2.0, 1.5, 1.5, 2.0, 1.0], "steps": [9, 9, 5, 5, 1, 1]})
+    assert choose(runs, ["lr"], {"lr": 1}, "ratio", "steps")["lr"] == 3  # (a tie at 1.5: the fewer steps)
+    assert choose(runs.assign(steps=0), ["lr"], {"lr": 2}, "ratio", "steps")["lr"] == 2
+    monkeypatch.syspath_prepend(str(REPO / "benchmarks"))
+    report = _benchmark("offline_sweep").report
+    table = pd.DataFrame([{"method": m, "seed": 0, "lr": lr, "batch_size": 16, "ratio": best, "last_ratio": last,
+                           "best_epoch": 3} for m in ("gru", "pure_dt") for lr, best, last in ((1, 4.0, 6.0), (2, 5.0, 5.5))])
+    capsys.readouterr()
+    report(table, {m: {"lr": 1, "batch_size": 16} for m in ("gru", "pure_dt")})
+    chosen = [line for line in capsys.readouterr().out.splitlines() if line.startswith("chosen")]
+    assert chosen == ["chosen: lr 2, batch_size 16", "chosen: lr 1, batch_size 16 (the current setting)"]
+
+
 def test_a_goto_legs_detour_is_its_shortest_path_beyond_the_manhattan_distance():
     legs = _benchmark("goto_legs").legs(
         load_layout(REPO / "layouts/drawn/deadend_14x14.txt"), "cost")
