@@ -15,7 +15,7 @@ validation layouts' optimum (1.00 = the optimum) — the last epoch's for the LS
 number of epochs), the plateau's best for the transformers — the mean over seeds; the lowest wins, fewer epochs
 to the run's best breaking ties, and the current setting wins a tie with others (each run's best epoch is printed
 too). Writes every run's row to ``--out`` and prints each learner's choice; ``--table CSV`` prints the choices of
-runs written before, without training. Runs go two at a time on the two cores.
+runs written before (seeds appended from another run count too), without training. Runs go two at a time on the two cores.
 """
 
 from __future__ import annotations
@@ -30,13 +30,18 @@ from online_sweep import choose  # (benchmarks/, this script's folder)
 KNOBS = ("lr", "batch_size")
 
 
-def current(params, method: str) -> dict:
-    """``method``'s learning rate and batch size in the unseen-layout experiment (its budget over its config)."""
+def train_config(params, method: str):
+    """``method``'s training config in the unseen-layout experiment (its budget over its own knobs)."""
     from hnsdt.compose.training import layout_network_configs
     from hnsdt.compose import generalisation as gen
 
-    _, train_cfg = layout_network_configs(params, method, 0, gen.training_layouts(params)[0].layout)
-    return {k: getattr(train_cfg, k) for k in KNOBS}
+    return layout_network_configs(params, method, 0, gen.training_layouts(params)[0].layout)[1]
+
+
+def centre(runs) -> dict:
+    """The setting a table's grid was made around (its middle learning rate, its smaller batch): the current one
+    when the sweep ran."""
+    return {"lr": sorted(runs["lr"].unique())[1], "batch_size": runs["batch_size"].min()}
 
 
 def grid(now: dict) -> list[dict]:
@@ -63,21 +68,16 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/offline_sweep.csv"))
     parser.add_argument("--table", type=Path, help="print the choices of the runs in this CSV (written before)")
     args = parser.parse_args()
+    if args.table:
+        return report(pd.read_csv(args.table))
     base = load_params("params.yaml", [])
     g = base.need("generalisation")
-    now = {method: current(base, method) for method in args.methods}
-    if args.table:
-        return report(pd.read_csv(args.table), now)
     jobs = []
     for method in args.methods:
-        budget = dict(g.budgets.get(method, {}))
+        cfg, budget = train_config(base, method), dict(g.budgets.get(method, {}))
         if method in base.baselines.offline:  # (an RNN: measure every epoch, never stop early)
-            from hnsdt.compose.training import layout_network_configs
-            from hnsdt.compose import generalisation as gen
-
-            _, cfg = layout_network_configs(base, method, 0, gen.training_layouts(base)[0].layout)
             budget["patience"] = cfg.epochs
-        for setting in grid(now[method]):
+        for setting in grid({k: getattr(cfg, k) for k in KNOBS}):
             budgets = {**g.budgets, method: {**budget, **setting}}
             params = load_params("params.yaml", [f"generalisation.budgets={budgets!r}",
                                                  f"generalisation.method_seeds.{method}={args.seeds!r}"])
@@ -100,11 +100,12 @@ def main() -> None:
     table.to_csv(args.out, index=False)
     print(table.to_string(index=False))
     print(f"\n{time.perf_counter() - start:.0f} s for {len(jobs)} runs; written {args.out}")
-    report(table, now)
+    report(table)
 
 
-def report(table, now: dict) -> None:
-    """Each learner's choice: by the last epoch's measure for a fixed-epoch learner, the best's for the others."""
+def report(table) -> None:
+    """Each learner's choice: by the last epoch's measure for a fixed-epoch learner, the best's for the others;
+    the setting the grid was made around (:func:`centre`) wins a tie."""
     from hnsdt.core.methods import method as lookup_method
 
     for method, part in table.groupby("method", sort=False):
@@ -112,7 +113,7 @@ def report(table, now: dict) -> None:
         score = "last_ratio" if fixed else "ratio"
         print(f"\n{method}: steps over the optimum's of the {'last' if fixed else 'best'} epoch ({score}; lower is "
               "better), the epoch of the run's best")
-        choose(part, list(KNOBS), now[method], score, "best_epoch", ("ratio", "last_ratio"))
+        choose(part, list(KNOBS), centre(part), score, "best_epoch", ("ratio", "last_ratio"))
 
 
 if __name__ == "__main__":

@@ -1358,11 +1358,12 @@ def test_a_sweep_chooses_the_lowest_score_then_the_tie_and_the_current_setting_w
     monkeypatch.syspath_prepend(str(REPO / "benchmarks"))
     report = _benchmark("offline_sweep").report
     table = pd.DataFrame([{"method": m, "seed": 0, "lr": lr, "batch_size": 16, "ratio": best, "last_ratio": last,
-                           "best_epoch": 3} for m in ("gru", "pure_dt") for lr, best, last in ((1, 4.0, 6.0), (2, 5.0, 5.5))])
+                           "best_epoch": 3} for m in ("gru", "pure_dt")
+                          for lr, best, last in ((1, 6.0, 6.0), (2, 4.0, 6.0), (4, 5.0, 5.5))])
     capsys.readouterr()
-    report(table, {m: {"lr": 1, "batch_size": 16} for m in ("gru", "pure_dt")})
+    report(table)  # (the current setting: the grid's middle learning rate, 2)
     chosen = [line for line in capsys.readouterr().out.splitlines() if line.startswith("chosen")]
-    assert chosen == ["chosen: lr 2, batch_size 16", "chosen: lr 1, batch_size 16 (the current setting)"]
+    assert chosen == ["chosen: lr 4, batch_size 16", "chosen: lr 2, batch_size 16 (the current setting)"]
 
 
 def test_a_goto_legs_detour_is_its_shortest_path_beyond_the_manhattan_distance():
