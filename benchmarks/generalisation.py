@@ -184,9 +184,12 @@ def kept_validation(models: Path, seeds: list[int]) -> dict[int, dict]:
 def validation_lines(kept: dict[int, dict], method: str, label: str) -> list[str]:
     """One line per seed: its kept value of the validation measure, when (an epoch, or an online learner's env
     step), and every value."""
-    unit = lambda h: ("epoch", "epoch") if "epoch" in h else ("env step", "evaluation")  # noqa: E731
-    return [f"{method}{label} seed {seed}: {h['value']:.2f} steps at {unit(h)[0]} {h.get('epoch', h.get('step'))} "
-            f"(per {unit(h)[1]}: " + " ".join(f"{v:.1f}" for v in h["history"]) + ")" for seed, h in kept.items()]
+    lines = []
+    for seed, h in kept.items():
+        at, per = (f"epoch {h['epoch']}", "epoch") if "epoch" in h else (f"env step {h['step']}", "evaluation")
+        lines.append(f"{method}{label} seed {seed}: {h['value']:.2f} steps at {at} (per {per}: "
+                     + " ".join(f"{v:.1f}" for v in h["history"]) + ")")
+    return lines
 
 
 def mean_validation(kept: dict[int, dict]) -> float:

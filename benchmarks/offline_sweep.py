@@ -2,7 +2,9 @@
 learners that train on the unseen-layout experiment's dataset.
 
 Usage: python benchmarks/offline_sweep.py [--methods lstm_hier gru pure_dt] [--seeds 100 101]
+                                          [--dataset generalisation/dataset]
                                           [--out benchmarks/results/offline_sweep.csv]
+       python benchmarks/offline_sweep.py --table benchmarks/results/offline_sweep.csv
 
 For each learner, six settings of two knobs — its learning rate (×½, ×1, ×2 of its current value) and its batch
 size (×1, ×2) — each trained from seeds the pipeline never reports (100, 101: the tables' seeds are 0–4) on the
@@ -15,7 +17,8 @@ validation layouts' optimum (1.00 = the optimum) — the last epoch's for the LS
 number of epochs), the plateau's best for the transformers — the mean over seeds; the lowest wins, fewer epochs
 to the run's best breaking ties, and the current setting wins a tie with others (each run's best epoch is printed
 too). Writes every run's row to ``--out`` and prints each learner's choice; ``--table CSV`` prints the choices of
-runs written before (seeds appended from another run count too), without training. Runs go two at a time on the two cores.
+runs written before (seeds appended from another run count too), without training. Runs go two at a time on the
+two cores.
 """
 
 from __future__ import annotations
