@@ -2,6 +2,7 @@
 
 Usage: python benchmarks/online_sweep.py [--methods dqn options ppo] [--envs keydoor multikeydoor]
                                          [--seeds 100 101] [--out benchmarks/results/online_sweep.csv]
+       python benchmarks/online_sweep.py --table benchmarks/results/online_sweep.csv [MORE.csv ...]
 
 For each online learner, six settings of two knobs — its learning rate (×½, ×1, ×2 of params.yaml's) and its
 exploration (DQN's and option-critic's ε decay over a quarter or half of the cap; PPO's entropy bonus 0.01 or
@@ -11,8 +12,10 @@ measure is the one the plateau uses, never a test episode: greedy steps from the
 fail_prob 0 (a failure counting the step limit), the best evaluation of the run, over the exact optimum's steps
 (1.00 = the optimum). A setting's score is the mean of that ratio over maps and seeds; the lowest wins, fewer
 env steps to the kept evaluation breaking ties, and the current setting wins a tie with others. Prints every
-run and each learner's choice, and writes every run's row to ``--out``. Each setting's seeds train as one stack
-(as the stage trains a learner's seeds), the stacks two at a time on the two cores.
+run and each learner's choice, and writes every run's row to ``--out`` (its ``current`` column: the setting the
+grid was made around). Each setting's seeds train as one stack (as the stage trains a learner's seeds), the
+stacks two at a time on the two cores. ``--table`` prints the choices of runs written before, from one table or
+several (more seeds of the same grid), without training.
 """
 
 from __future__ import annotations
@@ -23,13 +26,20 @@ import time
 from pathlib import Path
 
 
+def explore_knob(method: str) -> str:
+    """The exploration knob an online learner's sweep varies: PPO's entropy bonus, the others' ε decay."""
+    return "ent_coef" if method == "ppo" else "exploration_fraction"
+
+
+def grid_around(lr: float, method: str) -> list[dict]:
+    """The six settings of an online learner whose learning rate is ``lr``: {knob: value} overrides."""
+    values = [0.01, 0.05] if method == "ppo" else [0.25, 0.5]
+    return [{"lr": r, explore_knob(method): v} for r, v in itertools.product([lr / 2, lr, lr * 2], values)]
+
+
 def grid(params, method: str) -> list[dict]:
-    """The six settings of ``method``: {knob: value} overrides of ``baselines.<method>``."""
-    cfg = getattr(params.baselines, method)
-    lrs = [cfg["lr"] / 2, cfg["lr"], cfg["lr"] * 2]
-    explore = ({"ent_coef": [0.01, 0.05]} if method == "ppo" else {"exploration_fraction": [0.25, 0.5]})
-    (knob, values), = explore.items()
-    return [{"lr": lr, knob: v} for lr, v in itertools.product(lrs, values)]
+    """The six settings of ``method`` on the paper's maps: overrides of ``baselines.<method>``."""
+    return grid_around(getattr(params.baselines, method)["lr"], method)
 
 
 def main() -> None:
@@ -47,17 +57,20 @@ def main() -> None:
     parser.add_argument("--envs", nargs="+", default=["keydoor", "multikeydoor"])
     parser.add_argument("--seeds", nargs="+", type=int, default=[100, 101])
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/online_sweep.csv"))
+    parser.add_argument("--table", type=Path, nargs="+", help="print the choices of the runs in these CSVs")
     args = parser.parse_args()
+    if args.table:
+        return report(pd.concat([pd.read_csv(t, float_precision="round_trip") for t in args.table]))
     base = load_params("params.yaml", [])
-    current = {m: {k: getattr(base.baselines, m)[k] for k in grid(base, m)[0]} for m in args.methods}
     jobs = []
     for method in args.methods:
+        now = {k: getattr(base.baselines, method)[k] for k in grid(base, method)[0]}
         for setting in grid(base, method):
             overrides = [f"baselines.{method}.{k}={v!r}" for k, v in setting.items()]
             params = load_params("params.yaml", overrides)
             for env in args.envs:
                 runs = plan_runs(params, env, method, args.seeds, Path("unused"))
-                jobs.append(((method, env, setting), SeedStack(tuple(runs))))
+                jobs.append(((method, env, {**setting, "current": setting == now}), SeedStack(tuple(runs))))
     print(f"{len(jobs)} stacks of {len(args.seeds)} seeds", flush=True)
     start = time.perf_counter()
     results = run_tasks(train_run, [task for _, task in jobs], compute_settings(base), desc="sweep")
@@ -70,24 +83,29 @@ def main() -> None:
                          ("lr", "exploration_fraction", "ent_coef")},
                          "best_steps": best, "floor": usage["validation_floor"],
                          "ratio": best / usage["validation_floor"], "best_step": usage["best_step"],
-                         "env_steps": usage["env_steps"], "train_exits": usage["exits"]})
+                         "env_steps": usage["env_steps"], "train_exits": usage["exits"],
+                         "current": setting["current"]})
     table = pd.DataFrame(rows)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     table.to_csv(args.out, index=False)
     print(table.to_string(index=False))
     print(f"\n{time.perf_counter() - start:.0f} s for {len(jobs)} stacks; written {args.out}")
+    report(table)
+
+
+def report(table) -> None:
+    """Each learner's choice over both maps: mean steps over the optimum's, then env steps to the kept evaluation."""
     for method, part in table.groupby("method", sort=False):
-        knobs = [k for k in ("lr", "exploration_fraction", "ent_coef") if part[k].notna().any()]
         print(f"\n{method}: mean steps over the optimum's (lower is better), mean env steps to the kept evaluation")
-        choose(part, knobs, current[method], "ratio", "best_step")
+        choose(part, ["lr", explore_knob(method)], "ratio", "best_step")
 
 
-def choose(runs, knobs: list[str], current: dict, score: str, tie: str, shown: tuple[str, ...] = ()):
+def choose(runs, knobs: list[str], score: str, tie: str, shown: tuple[str, ...] = ()):
     """One learner's setting: the lowest mean ``score`` over its runs, then the lowest mean ``tie``, the current
-    setting winning a tie with others. Prints every setting's means (with ``shown``'s) and the choice."""
+    setting (the runs' ``current`` column: the one the grid was made around) winning a tie with others. Prints
+    every setting's means (with ``shown``'s) and the choice."""
     columns = dict.fromkeys((score, tie, *shown))
-    scores = runs.groupby(knobs).agg(**{c: (c, "mean") for c in columns}).reset_index()
-    scores["current"] = [all(row[k] == current[k] for k in knobs) for _, row in scores.iterrows()]
+    scores = runs.groupby(knobs).agg(**{c: (c, "mean") for c in columns}, current=("current", "any")).reset_index()
     scores = scores.sort_values([score, tie, "current"], ascending=[True, True, False])
     print(scores.to_string(index=False))
     chosen = scores.iloc[0]

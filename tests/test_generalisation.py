@@ -1345,25 +1345,37 @@ def _benchmark(name: str):
 
 
 def test_a_sweep_chooses_the_lowest_score_then_the_tie_and_the_current_setting_wins_a_tie(monkeypatch, capsys):
-    """The knob sweeps' rule (benchmarks/online_sweep.py, offline_sweep.py): the lowest mean score over a setting's
-    runs, then the lowest mean tie-breaker, the current setting winning a full tie; the offline sweep scores a
-    fixed-epoch learner (the LSTM, the GRU) by its last epoch, which the default keeps, and a transformer by its
-    plateau's best."""
+    """The knob sweeps' rule (benchmarks/online_sweep.py, unseen_sweep.py): the lowest mean score over a setting's
+    runs, then the lowest mean tie-breaker, the current setting winning a full tie; the unseen layouts' sweep scores
+    a fixed-epoch learner (the LSTM, the GRU) by its last epoch, which the default keeps, a transformer and an online
+    learner by its plateau's best."""
     import pandas as pd
 
     choose = _benchmark("online_sweep").choose
     runs = pd.DataFrame({"lr": [1, 1, 2, 2, 3, 3], "ratio": [1.0, 2.0, 1.5, 1.5, 2.0, 1.0], "steps": [9, 9, 5, 5, 1, 1]})
-    assert choose(runs, ["lr"], {"lr": 1}, "ratio", "steps")["lr"] == 3  # (a tie at 1.5: the fewer steps)
-    assert choose(runs.assign(steps=0), ["lr"], {"lr": 2}, "ratio", "steps")["lr"] == 2
+    assert choose(runs.assign(current=runs.lr == 1), ["lr"], "ratio", "steps")["lr"] == 3  # (1.5: the fewer steps)
+    assert choose(runs.assign(steps=0, current=runs.lr == 2), ["lr"], "ratio", "steps")["lr"] == 2
     monkeypatch.syspath_prepend(str(REPO / "benchmarks"))
-    report = _benchmark("offline_sweep").report
+    report = _benchmark("unseen_sweep").report
     table = pd.DataFrame([{"method": m, "seed": 0, "lr": lr, "batch_size": 16, "ratio": best, "last_ratio": last,
-                           "best_epoch": 3} for m in ("gru", "pure_dt")
+                           "best_epoch": 3, "current": lr == 2} for m in ("gru", "pure_dt")
                           for lr, best, last in ((1, 6.0, 6.0), (2, 4.0, 6.0), (4, 5.0, 5.5))])
     capsys.readouterr()
-    report(table)  # (the current setting: the grid's middle learning rate, 2)
+    report(table)
     chosen = [line for line in capsys.readouterr().out.splitlines() if line.startswith("chosen")]
     assert chosen == ["chosen: lr 4, batch_size 16", "chosen: lr 2, batch_size 16 (the current setting)"]
+    # an online learner keeps its best evaluation; a tie goes to fewer env steps to it, then to the setting the
+    # sweep marked current
+    online = pd.DataFrame([{"method": "dqn", "seed": 0, "lr": lr, "exploration_fraction": e, "ratio": ratio,
+                            "last_ratio": 9.0, "best_step": step, "current": (lr, e) == (1, 0.5)}
+                           for lr, e, ratio, step in ((1, 0.25, 2.0, 10), (1, 0.5, 1.0, 30), (2, 0.25, 1.0, 20),
+                                                      (2, 0.5, 3.0, 10), (4, 0.25, 1.0, 30), (4, 0.5, 1.0, 30))])
+    report(online)
+    assert [line for line in capsys.readouterr().out.splitlines() if line.startswith("chosen")] == [
+        "chosen: lr 2, exploration_fraction 0.25"]
+    report(online[online.lr != 2])
+    assert [line for line in capsys.readouterr().out.splitlines() if line.startswith("chosen")] == [
+        "chosen: lr 1, exploration_fraction 0.5 (the current setting)"]
 
 
 def test_a_goto_legs_detour_is_its_shortest_path_beyond_the_manhattan_distance():
