@@ -6,7 +6,7 @@ Usage: python benchmarks/unseen_sweep.py [--methods lstm_hier gru pure_dt] [--se
                                          [--dataset generalisation/dataset]
                                          [--out benchmarks/results/offline_sweep.csv]
        python benchmarks/unseen_sweep.py --methods dqn options ppo --out benchmarks/results/unseen_online_sweep.csv
-       python benchmarks/unseen_sweep.py --table benchmarks/results/offline_sweep.csv
+       python benchmarks/unseen_sweep.py --table benchmarks/results/offline_sweep.csv [MORE.csv ...]
 
 For each learner, six settings of two knobs — its learning rate (×½, ×1, ×2 of its current value) and, offline,
 its batch size (×1, ×2) or, online, its exploration (as on the paper's maps: DQN's and option-critic's ε decay over
@@ -20,8 +20,9 @@ test map: a run's score is the measure of the model the default would keep, over
 (1.00 = the optimum) — the last epoch's for the LSTM and the GRU (they train a fixed number of epochs), the
 plateau's best for the others — the mean over seeds; the lowest wins, fewer epochs (env steps, online) to the
 run's best breaking ties, and the current setting wins a tie with others. Writes every run's row to ``--out``
-and prints each learner's choice; ``--table CSV`` prints the choices of runs written before (seeds appended
-from another run count too), without training. Runs go two at a time on the two cores.
+and prints each learner's choice; ``--table CSV [CSV ...]`` prints the choices of runs written before (more
+seeds of the same grid, in the same table or another, count too), without training. Runs go two at a time on
+the two cores.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ def train_config(params, method: str):
 
 
 def online(method: str) -> bool:
+    """Whether ``method`` learns by acting (DQN, option-critic, PPO) rather than from the dataset."""
     from hnsdt.core.methods import method as lookup_method
 
     return lookup_method(method).training == "online"
@@ -78,10 +80,10 @@ def main() -> None:
     parser.add_argument("--seeds", nargs="+", type=int, default=[100, 101])
     parser.add_argument("--dataset", type=Path, default=Path("generalisation/dataset"))
     parser.add_argument("--out", type=Path, default=Path("benchmarks/results/offline_sweep.csv"))
-    parser.add_argument("--table", type=Path, help="print the choices of the runs in this CSV (written before)")
+    parser.add_argument("--table", type=Path, nargs="+", help="print the choices of the runs in these CSVs")
     args = parser.parse_args()
     if args.table:
-        return report(pd.read_csv(args.table, float_precision="round_trip"))
+        return report(pd.concat([pd.read_csv(t, float_precision="round_trip") for t in args.table]))
     base = load_params("params.yaml", [])
     g = base.need("generalisation")
     jobs = []
