@@ -4,18 +4,21 @@ Usage: python benchmarks/offline_budget.py [--env multikeydoor] [--epochs 1 2 4]
                                            [--methods pure_dt hnsdt lstm_hier gru hnsdt_paper pure_dt_paper]
                                            [--fail-probs 0.1 0.3] [--params params.yaml] [--validated]
                                            [--set train.formulation.hnsdt_paper=episode ...] [--decompose]
+                                           [--loss-plateau SHARE PATIENCE]
 Trains each method on the pipeline's dataset (data/datasets/ENV; run `dvc repro` first) with the knobs of
 params.yaml but the budget: ``--epochs`` passes over its training data, no step cap. A decision transformer
 trains once for max(--epochs) and is copied after each listed epoch (the model after e epochs of a longer run
 is the model of an e-epoch run: no schedule depends on the total); a recurrent one trains once per budget.
 With ``--validated`` each decision transformer trains instead to the plateau of the params' validation measure
-and the epoch it kept is printed. ``--set`` overrides a params key (dotted, the value read as YAML) as
-``dvc exp run -S`` would. ``--decompose`` also prints, per kind of sub-goal, where a plan-following method's
-steps go: steps per episode against the minimum for the sub-goals set, first actions right, sub-goals reached
-(as the report's decomposition table). Every model is evaluated on the pipeline's cells at fail_prob 0.1 and 0.3 (--episodes each). Prints success
-and mean steps on success per budget, with gradient steps, the loss and, for plan-following methods, the share
-of sub-goals reached within their allowance. Runs go in parallel on the local
-executor, one thread each, as in the pipeline.
+and the epoch it kept is printed; with ``--loss-plateau SHARE PATIENCE`` each recurrent one (the LSTM, the GRU)
+trains on all but SHARE of each behaviour's episodes to the plateau of those held-out episodes' loss, the rule
+the transformers stop on (the params' epochs the cap), and the epoch it kept is printed. ``--set`` overrides a
+params key (dotted, the value read as YAML) as ``dvc exp run -S`` would. ``--decompose`` also prints, per kind
+of sub-goal, where a plan-following method's steps go: steps per episode against the minimum for the sub-goals
+set, first actions right, sub-goals reached (as the report's decomposition table). Every model is evaluated on
+the pipeline's cells at fail_prob 0.1 and 0.3 (--episodes each). Prints success and mean steps on success per
+budget, with gradient steps, the loss and, for plan-following methods, the share of sub-goals reached within
+their allowance. Runs go in parallel on the local executor, one thread each, as in the pipeline.
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ import numpy as np  # noqa: E402
 
 
 def run(task):
-    method, env, seed, epochs, keep, params_path, overrides, episodes, fail_probs, validated = task
+    method, env, seed, epochs, keep, params_path, overrides, episodes, fail_probs, validated, loss_plateau = task
     from dataclasses import replace
     from pathlib import Path
 
@@ -57,6 +60,14 @@ def run(task):
         model, curve = train_dt(frames, model_cfg, replace(cfg, epochs=max(epochs), max_steps=0), progress=False,
                                 on_epoch=lambda e, step, m: snaps.__setitem__(e, (step, copy.deepcopy(m)))
                                 if e in keep else None)
+    elif loss_plateau:  # a recurrent learner to the plateau of its held-out episodes' loss (the transformers' rule)
+        from hnsdt.baselines.recurrent import train_recurrent
+
+        share, patience = loss_plateau
+        train_frames, measure = held_out_loss(frames, share, cfg)
+        model, _, usage = train_recurrent(train_frames, model_cfg, replace(cfg, patience=patience, max_steps=0),
+                                          progress=False, measure=measure)
+        snaps[usage["best_epoch"]] = (usage["gradient_steps"], model)
     else:
         from hnsdt.baselines.recurrent import train_recurrent
 
@@ -84,6 +95,39 @@ def run(task):
     return rows
 
 
+def held_out_loss(frames, share: float, cfg):
+    """A recurrent learner's training frames without ``share`` of each behaviour's episodes (the transformers'
+    held-out episodes, :func:`hnsdt.models.train.validation_episodes`) and a measure: its mean loss per action on
+    those episodes — failed actions and recoveries included, which the greedy steps from the start never see."""
+    import torch
+
+    from hnsdt.baselines.recurrent import episode_batch, training_episodes
+    from hnsdt.models.fit import to_device
+    from hnsdt.models.train import validation_episodes
+    from hnsdt.models.windows import frames_from_arrays
+
+    held = validation_episodes(frames, share)
+
+    def part(mask):
+        return frames_from_arrays(frames.states[mask], frames.actions[mask], frames.rewards[mask],
+                                  frames.subgoals[mask], frames.targets[mask], frames.episode[mask],
+                                  frames.timestep[mask], frames.policy[mask])
+
+    kept, out = part(~held), part(held)
+    starts, lengths = training_episodes(out, cfg.behaviours)
+
+    def measure(model) -> float:
+        total = count = 0.0
+        with torch.no_grad():
+            for rows in np.array_split(np.arange(len(starts)), max(1, -(-len(starts) // cfg.batch_size))):
+                batch = to_device(episode_batch(out, starts[rows], lengths[rows], model.n_actions), torch.device("cpu"))
+                n = float(batch["mask"].sum())
+                total += float(model.loss(batch)) * n
+                count += n
+        return total / max(count, 1.0)
+    return kept, measure
+
+
 def main() -> None:
     import pandas as pd
 
@@ -104,17 +148,21 @@ def main() -> None:
     ap.add_argument("--validated", action="store_true",
                     help="decision transformers: train to the plateau of the params' validation measure "
                          "(train.validation > 0; --epochs ignored) and report the epoch it kept")
+    ap.add_argument("--loss-plateau", type=float, nargs=2, metavar=("SHARE", "PATIENCE"),
+                    help="recurrent learners: hold out SHARE of each behaviour's episodes and train to the plateau "
+                         "of their loss (PATIENCE epochs; the params' epochs the cap); report the epoch kept")
     args = ap.parse_args()
     t = time.perf_counter()
+    plateau = (args.loss_plateau[0], int(args.loss_plateau[1])) if args.loss_plateau else None
     tasks = [(m, args.env, s, args.epochs, set(args.epochs), args.params, tuple(args.set), args.episodes,
-              args.fail_probs, args.validated)
+              args.fail_probs, args.validated, plateau)
              for m in args.methods for s in args.seeds]
     rows = [r for part in run_tasks(run, tasks, Compute(), desc="budgets") for r in part]
     segments = pd.DataFrame([seg for r in rows for seg in r.pop("segments")])
     table = pd.DataFrame(rows)
-    if args.validated:
-        print(table[table.fail_prob == table.fail_prob.min()][["method", "seed", "epochs", "steps"]].to_string(
-            index=False))
+    if args.validated or plateau:  # (each seed's epoch kept, and its success at each fail_prob)
+        print(table.pivot_table(index=["method", "seed", "epochs", "steps"], columns="fail_prob",
+                                values="success").to_string(float_format=lambda v: f"{v:.3f}"))
         table["epochs"] = "validated"
     out = table.groupby(["method", "epochs", "fail_prob"]).agg(
         gradient_steps=("steps", "first"), loss=("loss", "mean"), success=("success", "mean"),
@@ -123,7 +171,7 @@ def main() -> None:
     print(f"\n{args.env}, seeds {args.seeds}, {args.episodes} episodes per cell ({time.perf_counter() - t:.0f} s)")
     print(out.to_string(index=False, float_format=lambda v: f"{v:.3f}"))
     if args.decompose and not segments.empty:
-        if args.validated:
+        if args.validated or plateau:
             segments["epochs"] = "validated"
         from hnsdt.report.paper_arm import step_decomposition
 
