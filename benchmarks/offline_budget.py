@@ -120,7 +120,8 @@ def held_out_loss(frames, share: float, cfg):
         total = count = 0.0
         with torch.no_grad():
             for rows in np.array_split(np.arange(len(starts)), max(1, -(-len(starts) // cfg.batch_size))):
-                batch = to_device(episode_batch(out, starts[rows], lengths[rows], model.n_actions), torch.device("cpu"))
+                batch = to_device(episode_batch(out, starts[rows], lengths[rows], model.n_actions),
+                                  next(model.parameters()).device)
                 n = float(batch["mask"].sum())
                 total += float(model.loss(batch)) * n
                 count += n

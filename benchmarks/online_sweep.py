@@ -82,15 +82,27 @@ def main() -> None:
             rows.append({"method": method, "env": env, "seed": seed, **{k: setting.get(k) for k in
                          ("lr", "exploration_fraction", "ent_coef")},
                          "best_steps": best, "floor": usage["validation_floor"],
-                         "ratio": best / usage["validation_floor"], "best_step": usage["best_step"],
-                         "env_steps": usage["env_steps"], "train_exits": usage["exits"],
+                         "ratio": best / usage["validation_floor"], **online_usage(usage),
                          "current": setting["current"]})
+    report(write(rows, args.out, f"{time.perf_counter() - start:.0f} s for {len(jobs)} stacks"))
+
+
+def online_usage(usage: dict) -> dict:
+    """An online run's row fields from its checkpoint's usage: the env step of the kept evaluation, the env steps
+    trained, the training episodes that reached the exit."""
+    return {"best_step": usage["best_step"], "env_steps": usage["env_steps"], "train_exits": usage["exits"]}
+
+
+def write(rows: list[dict], out: Path, took: str):
+    """A sweep's runs as a table, written to ``out`` and printed (with ``took``); the table."""
+    import pandas as pd
+
     table = pd.DataFrame(rows)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    table.to_csv(args.out, index=False)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    table.to_csv(out, index=False)
     print(table.to_string(index=False))
-    print(f"\n{time.perf_counter() - start:.0f} s for {len(jobs)} stacks; written {args.out}")
-    report(table)
+    print(f"\n{took}; written {out}")
+    return table
 
 
 def report(table) -> None:

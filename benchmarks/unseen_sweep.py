@@ -32,7 +32,7 @@ import itertools
 import time
 from pathlib import Path
 
-from online_sweep import choose, explore_knob, grid_around  # (benchmarks/, this script's folder)
+from online_sweep import choose, explore_knob, grid_around, online_usage, write  # (benchmarks/, this script's folder)
 
 
 def train_config(params, method: str):
@@ -107,16 +107,11 @@ def main() -> None:
         history = usage["validation_steps"]
         floor = usage.get("validation_floor", float("nan"))
         best = min(h["value"] for h in history)
-        trained = ({"best_step": usage["best_step"], "env_steps": usage["env_steps"], "train_exits": usage["exits"]}
-                   if online(method) else {"best_epoch": usage["best_epoch"], "epochs": len(history)})
+        trained = (online_usage(usage) if online(method)
+                   else {"best_epoch": usage["best_epoch"], "epochs": len(history)})
         rows.append({"method": method, "seed": seed, **setting, "best_steps": best, "last_steps": history[-1]["value"],
                      "floor": floor, "ratio": best / floor, "last_ratio": history[-1]["value"] / floor, **trained})
-    table = pd.DataFrame(rows)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    table.to_csv(args.out, index=False)
-    print(table.to_string(index=False))
-    print(f"\n{time.perf_counter() - start:.0f} s for {len(jobs)} runs; written {args.out}")
-    report(table)
+    report(write(rows, args.out, f"{time.perf_counter() - start:.0f} s for {len(jobs)} runs"))
 
 
 def report(table) -> None:
