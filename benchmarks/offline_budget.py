@@ -64,15 +64,15 @@ def run(task):
         from hnsdt.baselines.recurrent import train_recurrent
 
         share, patience = loss_plateau
-        train_frames, measure = held_out_loss(frames, share, cfg)
-        model, _, usage = train_recurrent(train_frames, model_cfg, replace(cfg, patience=patience, max_steps=0),
-                                          progress=False, measure=measure)
+        model, _, usage = train_recurrent(frames, model_cfg, replace(cfg, validation=share, patience=patience,
+                                                                     max_steps=0), progress=False)
         snaps[usage["best_epoch"]] = (usage["gradient_steps"], model)
     else:
         from hnsdt.baselines.recurrent import train_recurrent
 
         for e in sorted(keep):
-            model, _, usage = train_recurrent(frames, model_cfg, replace(cfg, epochs=e, max_steps=0), progress=False)
+            model, _, usage = train_recurrent(frames, model_cfg, replace(cfg, epochs=e, max_steps=0, validation=0.0,
+                                                                     patience=0), progress=False)
             snaps[e] = (usage["gradient_steps"], model)
     E, ex = env_spec(params, env), method_executor(params, method)
     rows = []
@@ -93,40 +93,6 @@ def run(task):
             seg = segment_rows(Cell(method, env, fp, seed), eps, layout_navigator(E.layout))
             rows.append(row | {"segments": [r | {"epochs": e, "n_episodes": len(eps)} for r in seg]})
     return rows
-
-
-def held_out_loss(frames, share: float, cfg):
-    """A recurrent learner's training frames without ``share`` of each behaviour's episodes (the transformers'
-    held-out episodes, :func:`hnsdt.models.train.validation_episodes`) and a measure: its mean loss per action on
-    those episodes — failed actions and recoveries included, which the greedy steps from the start never see."""
-    import torch
-
-    from hnsdt.baselines.recurrent import episode_batch, training_episodes
-    from hnsdt.models.fit import to_device
-    from hnsdt.models.train import validation_episodes
-    from hnsdt.models.windows import frames_from_arrays
-
-    held = validation_episodes(frames, share)
-
-    def part(mask):
-        return frames_from_arrays(frames.states[mask], frames.actions[mask], frames.rewards[mask],
-                                  frames.subgoals[mask], frames.targets[mask], frames.episode[mask],
-                                  frames.timestep[mask], frames.policy[mask])
-
-    kept, out = part(~held), part(held)
-    starts, lengths = training_episodes(out, cfg.behaviours)
-
-    def measure(model) -> float:
-        total = count = 0.0
-        with torch.no_grad():
-            for rows in np.array_split(np.arange(len(starts)), max(1, -(-len(starts) // cfg.batch_size))):
-                batch = to_device(episode_batch(out, starts[rows], lengths[rows], model.n_actions),
-                                  next(model.parameters()).device)
-                n = float(batch["mask"].sum())
-                total += float(model.loss(batch)) * n
-                count += n
-        return total / max(count, 1.0)
-    return kept, measure
 
 
 def main() -> None:

@@ -255,6 +255,7 @@ def test_an_online_learner_stops_at_the_plateau_of_its_validation_and_keeps_the_
     # ... nor while it has never reached the exit (every evaluation at the measure's ceiling): to the cap
     _, _, usage = train(keydoor, 60, net, cfg, progress=False, measure=_Scripted([5.0] * 10, ceiling=5.0))
     assert usage["env_steps"] == 2000 and not usage["stopped_early"]
+    assert usage["best_step"] == 2000  # (the latest of the ties: its most trained weights, not its first)
     # ... but at the measure's floor (the optimum's steps) at once, exploring or not: nothing could replace it
     _, _, usage = train(keydoor, 60, net, cfg, progress=False, measure=_Scripted([5.0, 3.0] + [1.0] * 8, floor=3.0))
     assert usage["env_steps"] == 400 and usage["best_step"] == 400

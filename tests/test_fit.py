@@ -274,6 +274,27 @@ def test_validation_stops_at_the_plateau_and_keeps_the_best_epoch(frames, keydoo
         assert torch.equal(value, snapshots[2][name]), name
 
 
+def test_a_recurrent_learner_holds_out_episodes_and_keeps_the_epoch_of_their_lowest_loss(frames, keydoor):
+    """With ``validation`` a share of the episodes trains nothing and their loss per action is the measure: the
+    model kept is the epoch whose held-out loss was the lowest (measured again here on those episodes), and the
+    data used counts the rest. Fails when the held-out episodes train too or another epoch's weights are kept."""
+    from hnsdt.baselines.recurrent import held_out_loss, training_episodes
+    from hnsdt.models.train import validation_episodes
+
+    cfg = RecurrentConfig(cell="gru", hierarchical=False, n_flags=keydoor.n_flags, grid_h=keydoor.shape[0],
+                          grid_w=keydoor.shape[1], n_layers=1, hidden=16, embed=8)
+    train_cfg = RecurrentTrainConfig(epochs=6, batch_size=4, lr=0.02, seed=1, validation=0.25, patience=2)
+    model, curve, usage = train_recurrent(frames, cfg, train_cfg, progress=False)
+    starts, lengths = training_episodes(frames)
+    held = validation_episodes(frames, 0.25)[starts]
+    assert held.sum() == 6 and usage["dataset_episodes"] == 24 - 6 and usage["dataset_frames"] == lengths[~held].sum()
+    values = [h["value"] for h in usage["validation_loss"]]
+    assert usage["best_epoch"] == 1 + int(np.argmin(values)) and len(values) == curve[-1]["epoch"]
+    assert held_out_loss(frames, starts[held], lengths[held], 4)(model) == min(values)
+    with pytest.raises(ValueError, match="set patience"):
+        train_recurrent(frames, cfg, replace(train_cfg, patience=0), progress=False)
+
+
 def test_a_learner_that_never_reached_the_exit_is_at_no_plateau(frames, keydoor):
     """A measure at its ceiling (every validation start failed: the step limit) in every epoch so far does not
     stop training on patience: 100, 100, 100, then 60, 70, 80 with patience 2 runs on past epoch 3 and stops

@@ -1002,9 +1002,13 @@ def test_an_offline_baselines_patience_stops_it_on_the_validation_layouts(tmp_pa
     params["generalisation"]["validation_layouts"] = 0
     with pytest.raises(ParamsError, match=r"generalisation.budgets.lstm_hier.patience .*validation_layouts > 0"):
         plan_unseen(validate(params), "lstm_hier", dataset)
-    # the paper protocol: the greedy steps to the exit from the map's start, and random states of it (starts)
-    params["baselines"]["lstm_hier"].update(patience=2, starts=3)
+    # the paper protocol: the loss on held-out episodes (validation > 0, the default) or the greedy steps to the
+    # exit from the map's start, and random states of it (starts)
+    params["baselines"]["lstm_hier"].update(patience=2, starts=3, validation=0.1)
     params["baselines"]["offline"] = ["lstm_hier"]
+    (run,) = plan_runs(validate(params), "keydoor", "lstm_hier", [0], dataset)
+    assert run.measure is None and run.train_cfg.validation == 0.1
+    params["baselines"]["lstm_hier"]["validation"] = 0.0
     (run,) = plan_runs(validate(params), "keydoor", "lstm_hier", [0], dataset)
     (course,) = run.measure.courses
     assert len(course.starts) == 3 and run.measure.ceiling == course.max_steps
@@ -1032,7 +1036,8 @@ def test_an_online_learners_patience_stops_it_on_validation_starts_of_its_maps(t
         model, facts, curve = train_run(task)
         usage = facts["usage"]
         history = [h["value"] for h in usage["validation_steps"]]
-        best = int(np.argmin(history))
+        best = int(np.argmin(history))  # (the first of ties; at the ceiling, never at the exit: the latest)
+        best = len(history) - 1 if history[best] >= task.measure.ceiling else best
         assert usage["best_step"] == usage["validation_steps"][best]["step"] and 1 <= len(history) <= 3
         assert task.measure(model) == history[best]  # the kept weights are the best evaluation's
         assert curve[-1]["step"] <= usage["env_steps"]

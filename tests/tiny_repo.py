@@ -70,7 +70,8 @@ def tiny_params(path: Path) -> None:
     # (≈ 2.5 s) for seconds of work, on cores the other test worker uses (pools: tests/test_train_cli.py)
     params["generalisation"].update(train_layouts=3, evaluated_train_layouts=1, heldout_layouts=1, seeds=[0],
                                     method_seeds={}, episodes_per_layout=2, episodes=2,
-                                    budgets={})  # the tiny knobs above
+                                    budgets={m: {"validation": 0.0, "patience": 0} for m in ("lstm_hier", "gru")})
+    # (the tiny knobs above; the RNNs at fixed epochs, as in the default)
     params["generalisation"]["minigrid"] = [{"id": "MiniGrid-DoorKey-8x8-v0", "layouts": 1, "max_steps": 100}]
     params["generalisation"]["drawn"]["max_steps"] = 150  # untrained learners walk to the limit: every drawn map
     # validates at 150 (the optimum's 0.99 at fail_prob 0.2), not at 120 (the zigzag)

@@ -199,7 +199,9 @@ class Plateau:
 
     def update(self, steps: int, value: float, net: nn.Module, used: dict, may_stop: bool = True) -> None:
         self.history.append({"step": steps, "value": value})
-        if self.best is None or value < self.best[0]:
+        never = self.best is not None and min(value, self.best[0]) >= self.ceiling - 1e-9  # (no exit reached yet:
+        # the latest of the ties at the ceiling, a seed that never reaches the exit keeps its most trained weights)
+        if self.best is None or value < self.best[0] or never:
             self.best = (value, len(self.history) - 1, steps,
                          {k: v.detach().cpu().clone() for k, v in net.state_dict().items()})
         waited = len(self.history) - 1 - self.best[1] >= self.patience

@@ -16,8 +16,9 @@ import torch
 from hnsdt.agents.rollout import distinct_rows
 from hnsdt.envs.dynamics import PICK
 from hnsdt.models.windows import Frames
-from hnsdt.models.fit import FitState, Objective, Validation, fit
+from hnsdt.models.fit import FitState, Objective, Validation, fit, to_device
 from hnsdt.models.recurrent import START_ACTION, RecurrentConfig, RecurrentPolicy
+from hnsdt.models.train import validation_episodes
 from hnsdt.models.view import turned_maps
 
 
@@ -33,10 +34,13 @@ class RecurrentTrainConfig:
     behaviours: tuple[str, ...] = ()  # collection behaviours to learn from (empty = all)
     symmetries: int = 1  # each episode, every epoch anew, on its map turned at random (view networks only;
     #                      hnsdt.models.view.turned_maps)
-    patience: int = 0  # > 0: stop once the greedy steps to the exit from validation start states (the unseen
-    #                    layouts': their validation layouts'; a paper map's: its start and random states of it;
-    #                    hnsdt.evaluation.validation.StepsToExit) have not improved for this many epochs, keeping the
-    #                    best epoch's weights; `epochs` is then the cap. 0: train every epoch
+    patience: int = 0  # > 0: stop once the validation measure has not improved for this many epochs, keeping the
+    #                    best epoch's weights; `epochs` is then the cap. 0: train every epoch. The measure: the loss
+    #                    on held-out episodes with `validation` > 0 (the transformers' rule), else the greedy steps
+    #                    to the exit from validation start states (the unseen layouts': their validation layouts';
+    #                    a paper map's: its start and random states of it; hnsdt.evaluation.validation.StepsToExit)
+    validation: float = 0.0  # > 0: this share of each behaviour's episodes is held out of training and measured
+    #                          (hnsdt.models.train.validation_episodes: the transformers' held-out episodes)
     starts: int = 64  # with patience: about this many start states, spread over the validation layouts
 
 
@@ -74,9 +78,15 @@ def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTr
     starts, lengths = training_episodes(frames, cfg.behaviours)
     if len(starts) == 0:
         raise ValueError(f"no training episodes from behaviours {list(cfg.behaviours) or 'any'} in the dataset")
-    if cfg.patience and measure is None:
+    if cfg.validation > 0:  # held-out episodes: out of training, their loss the measure
+        if not cfg.patience:
+            raise ValueError("validation > 0 holds out episodes to stop at the plateau of their loss: set patience")
+        held = validation_episodes(frames, cfg.validation)[starts]
+        measure = held_out_loss(frames, starts[held], lengths[held], cfg.batch_size)
+        starts, lengths = starts[~held], lengths[~held]
+    elif cfg.patience and measure is None:
         raise ValueError("patience > 0 stops on the steps to the exit from validation start states: the trainer "
-                         "needs that measure")
+                         "needs that measure (or validation > 0: the loss on held-out episodes)")
     validation = Validation(measure, cfg.patience) if cfg.patience else None
     per_epoch = int(np.ceil(len(starts) / cfg.batch_size))
     objective = Objective(
@@ -96,6 +106,24 @@ def train_recurrent(frames: Frames, model_cfg: RecurrentConfig, cfg: RecurrentTr
     if validation is not None:  # the budget the evidence chose
         usage |= validation.record(getattr(measure, "name", "steps"))
     return model, curve, usage
+
+
+def held_out_loss(frames: Frames, starts: np.ndarray, lengths: np.ndarray, batch_size: int):
+    """The measure of held-out episodes (``starts``, ``lengths``): a model's mean loss per action on them, failed
+    actions and recoveries included, which the greedy steps from a start never see."""
+    def measure(model) -> float:
+        total = count = 0.0
+        device = next(model.parameters()).device
+        with torch.no_grad():
+            for rows in np.array_split(np.arange(len(starts)), max(1, -(-len(starts) // batch_size))):
+                batch = to_device(episode_batch(frames, starts[rows], lengths[rows], model.n_actions), device)
+                n = float(batch["mask"].sum())
+                total += float(model.loss(batch)) * n
+                count += n
+        return total / max(count, 1.0)
+
+    measure.name = "loss"
+    return measure
 
 
 class RecurrentAgent:

@@ -88,7 +88,8 @@ def plan_runs(params: Params, env: str, method: str, seeds: list[int], dataset: 
         else:
             data, facts = (bs.env.layout, bs.env.max_steps), {}
         measure = None
-        if getattr(bs.train, "patience", 0):  # greedy steps to the exit from the map's start (where the online
+        if getattr(bs.train, "patience", 0) and not getattr(bs.train, "validation", 0):  # (validation: an offline
+            # learner's held-out episodes' loss) greedy steps to the exit from the map's start (where the online
             # learners train from) and, with starts > 1, random states of it (as the offline datasets' random starts)
             measure = StepsToExit.on_layouts([bs.env.layout], bs.env.max_steps, bs.train.starts, method,
                                              method_executor(params, method), facts)
@@ -343,6 +344,8 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
                                          else train_cfg.starts)
         measure = StepsToExit.on_layouts(validation(), g.max_steps, starts, method, layout_executor(params, method),
                                          facts)
+        if getattr(train_cfg, "validation", 0):  # (an offline baseline: every training episode trains)
+            train_cfg = replace(train_cfg, validation=0.0)
     elif lookup_method(method).stage != "train" and getattr(train_cfg, "patience", 0):  # (a DT's: train.validation)
         raise params.error(f"generalisation.budgets.{method}.patience stops on the validation layouts: set "
                            "generalisation.validation_layouts > 0")
