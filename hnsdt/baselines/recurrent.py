@@ -16,7 +16,7 @@ import torch
 from hnsdt.agents.rollout import distinct_rows
 from hnsdt.envs.dynamics import PICK
 from hnsdt.models.windows import Frames
-from hnsdt.models.fit import FitState, Objective, Validation, fit, to_device
+from hnsdt.models.fit import FitState, Objective, Validation, fit, to_device, weighted_loss
 from hnsdt.models.recurrent import START_ACTION, RecurrentConfig, RecurrentPolicy
 from hnsdt.models.train import validation_episodes
 from hnsdt.models.view import turned_maps
@@ -112,15 +112,10 @@ def held_out_loss(frames: Frames, starts: np.ndarray, lengths: np.ndarray, batch
     """The measure of held-out episodes (``starts``, ``lengths``): a model's mean loss per action on them, failed
     actions and recoveries included, which the greedy steps from a start never see."""
     def measure(model) -> float:
-        total = count = 0.0
         device = next(model.parameters()).device
-        with torch.no_grad():
-            for rows in np.array_split(np.arange(len(starts)), max(1, -(-len(starts) // batch_size))):
-                batch = to_device(episode_batch(frames, starts[rows], lengths[rows], model.n_actions), device)
-                n = float(batch["mask"].sum())
-                total += float(model.loss(batch)) * n
-                count += n
-        return total / max(count, 1.0)
+        parts = np.array_split(np.arange(len(starts)), max(1, -(-len(starts) // batch_size)))
+        return weighted_loss(model, (to_device(episode_batch(frames, starts[rows], lengths[rows], model.n_actions),
+                                               device) for rows in parts), "mask")
 
     measure.name = "loss"
     return measure

@@ -207,14 +207,21 @@ def mean_loss(objective: Objective, batch_size: int, device: torch.device) -> Ca
     """A validation measure: the model's loss over every example of ``objective`` (in order), each supervised
     step weighing the same."""
     def measure(model) -> float:
-        total = count = 0.0
-        for rows in objective.batches(objective.examples, batch_size):
-            batch = to_device(objective.batch(rows), device)
-            n = float(batch["loss_mask"].sum())
+        return weighted_loss(model, (to_device(objective.batch(rows), device)
+                                     for rows in objective.batches(objective.examples, batch_size)), "loss_mask")
+    return measure
+
+
+def weighted_loss(model: torch.nn.Module, batches, mask: str) -> float:
+    """``model.loss`` over ``batches`` (on the model's device), each supervised step (``batch[mask]``) weighing
+    the same: the mean of a measure over held-out examples, whatever their batches' sizes."""
+    total = count = 0.0
+    with torch.no_grad():
+        for batch in batches:
+            n = float(batch[mask].sum())
             total += float(model.loss(batch)) * n
             count += n
-        return total / max(count, 1.0)
-    return measure
+    return total / max(count, 1.0)
 
 
 def _to_cpu(obj):
