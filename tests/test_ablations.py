@@ -58,13 +58,22 @@ def test_the_scaling_figure_follows_each_family_from_its_own_first_row(tmp_path)
              _variant("multikeydoor, conv", "encoder", encoder="5×5 + 2 conv", family="multikeydoor")]
     rows = pd.concat([_variant("default", "reference"), *case2])
     points = ablations.scaling_points(rows)
-    assert sorted(set(points.variant)) == ["default", "multikeydoor", "multikeydoor, 400 maps"]
+    assert sorted(set(points.variant)) == ["multikeydoor", "multikeydoor, 400 maps"]  # (one count: no line)
     assert set(points[points.variant == "multikeydoor, 400 maps"].family) == {"multikeydoor"}
     orphan = _variant("obstacles, 400 maps", "maps", maps=400, family="keydoor_obstacles")  # no 40-map row of its own
     assert "obstacles, 400 maps" not in set(ablations.scaling_points(pd.concat([rows, orphan])).variant)
     assert ablations.scaling_figure(rows, tmp_path / "scaling.png")  # two map counts in one family: a curve
     one_count = rows[rows.variant != "multikeydoor, 400 maps"]  # two families, one map count each: none
     assert not ablations.scaling_figure(one_count, tmp_path / "none.png") and not (tmp_path / "none.png").exists()
+    module = "5×5 flattened + whole-map planner"  # a family first measured with another encoder, then again ...
+    mazes = [_variant("module, mazes", "family", encoder=module, family="keydoor_mazes"),
+             _variant("module, walls block", "encoder", encoder=module, family="keydoor_mazes"),
+             _variant("module, mazes, 9 × 9", "encoder", encoder="9×9 + module", family="keydoor_mazes"),
+             _variant("module, walls block, 400 maps", "maps", maps=400, encoder=module, family="keydoor_mazes")]
+    points = ablations.scaling_points(pd.concat([rows, *mazes]))  # ... its line starts from the latest measurement
+    assert sorted(set(points[points.family == "keydoor_mazes"].variant)) == [
+        "module, walls block", "module, walls block, 400 maps"]
+    assert sorted(set(points[points.family != "keydoor_mazes"].variant)) == ["multikeydoor", "multikeydoor, 400 maps"]
     no_reference = pd.concat(case2)  # a file of variants without the reference row: no figure, no error
     assert not ablations.scaling_figure(no_reference, tmp_path / "none.png") and not (tmp_path / "none.png").exists()
 

@@ -1427,3 +1427,41 @@ def test_operators_are_compared_on_the_maps_both_evaluated():
                          "| MiniGrid grids | 0 | 1.000 | 12.0 | 1.0 | 1.000 | 5.0 | 2.0 |",
                          "| MiniGrid grids | 0.3 | 1.000 | 12.0 | 1.0 | 1.000 | 5.0 | 2.0 |"]
     assert operators_table(move.drop(columns="plans"), goto, ("move", "goto")) == []
+
+
+def test_every_executor_stands_in_one_table(tmp_path):
+    """The report's table of executors: the main run's reference and HNSDT, then each further run's transformers
+    (never its reference again), each row naming its sub-goals, what it reads and its family, each cell the
+    success and steps / optimum of that run's split (a split a run did not evaluate: a dash)."""
+    import pandas as pd
+
+    from hnsdt.report.unseen import executors_table
+
+    params = _tiny_generalisation_params(tmp_path)
+    params["unseen_experiments"] = {"goto": {"operators": "goto", "whole_map": True, "methods": ["hnsdt", "pure_dt"]},
+                                    "view": {"operators": "goto", "family": "multikeydoor", "minigrid": []}}
+    base = validate(params)
+
+    def summary(cells):
+        return pd.DataFrame([{"method": m, "split": s, "fail_prob": fp, "success_mean": v, "success_std": 0.0,
+                              "steps_ratio_mean": 1.0 + fp} for (m, s), v in cells.items() for fp in (0.0, 0.2)])
+
+    main = summary({("symbolic", "heldout"): 1.0, ("hnsdt", "heldout"): 1.0, ("hnsdt", "minigrid"): 0.9})
+    goto = summary({("symbolic", "heldout"): 1.0, ("hnsdt", "heldout"): 0.5, ("pure_dt", "heldout"): 0.25})
+    view = summary({("hnsdt", "heldout"): 0.75})
+    side = 2 * base.generalisation.view_radius + 1
+    family = base.generalisation.family
+    lines = executors_table(base, main, [{"name": "goto", "summary": goto}, {"name": "view", "summary": view}])
+    assert lines.splitlines() == [
+        "| executor: sub-goals, what it reads; training family (run) | held-out layouts | MiniGrid grids |",
+        "|---|---|---|",
+        f"| BFS + controllers: {OPERATOR_LABEL[base.generalisation.operators]}, the planner's way; `{family}` "
+        "(main run) | 1.000 (1.10×) | – |",
+        f"| HNSDT (ours): {OPERATOR_LABEL[base.generalisation.operators]}, {side} × {side} view; `{family}` (main run) "
+        "| 1.000 (1.10×) | 0.900 (1.10×) |",
+        f"| HNSDT (ours): GoTo, whole map + planning module; `{family}` (`goto`) | 0.500 (1.10×) | – |",
+        f"| Pure DT: no sub-goal, whole map + planning module; `{family}` (`goto`) | 0.250 (1.10×) | – |",
+        f"| HNSDT (ours): GoTo, {side} × {side} view; `multikeydoor` (`view`) | 0.750 (1.10×) | – |"]
+
+
+OPERATOR_LABEL = {"move": "Move", "goto": "GoTo"}

@@ -66,14 +66,25 @@ def record(path: str | Path, rows: pd.DataFrame) -> None:
 def scaling_points(rows: pd.DataFrame) -> pd.DataFrame:
     """The variants that differ from their family's first row in their maps alone: per family, method and split,
     the number of training maps (and episodes per map) against success and steps / optimum. A family's first row
-    is the reference (its family) or a variant that changes only the family; the reference's encoder, no
-    relabelled rounds."""
-    ref = rows[rows.ingredient == "reference"]
-    if ref.empty:
+    is the reference (its family) or a variant that changes only the family, with no relabelled rounds; a later
+    variant of that family with the same maps and encoder (the same executor measured again after a change that
+    leaves its encoder's name, ingredient ``encoder``) takes its place, so that the line starts from the latest
+    measurement; the ``maps`` variants with that encoder make the rest of the line. A family measured at one map
+    count has no line."""
+    if not (rows.ingredient == "reference").any():
         return rows.iloc[:0]
-    first = rows.ingredient.isin(["reference", "family"])
-    same = (rows.encoder == ref.encoder.iloc[0]) & (rows.relabel_rounds == 0) & rows.family.isin(rows.family[first])
-    return rows[(first | (rows.ingredient == "maps")) & same]
+    keep = []
+    for _, d in rows[rows.relabel_rounds == 0].groupby("family", sort=False):
+        first = d[d.ingredient.isin(["reference", "family"])]
+        if first.empty:
+            continue
+        encoder, maps, episodes = first[["encoder", "train_layouts", "episodes_per_map"]].iloc[0]
+        again = d[d.ingredient.isin(["reference", "family", "encoder"]) & (d.encoder == encoder)
+                  & (d.train_layouts == maps) & (d.episodes_per_map == episodes)]
+        line = d[(d.variant == again.variant.iloc[-1]) | ((d.ingredient == "maps") & (d.encoder == encoder))]
+        if line.train_layouts.nunique() >= 2:  # (one map count makes no line)
+            keep.append(line)
+    return pd.concat(keep) if keep else rows.iloc[:0]
 
 
 SPLITS = {"heldout": "held-out", "minigrid": "MiniGrid 8×8", "minigrid_16x16": "MiniGrid 16×16", "drawn": "hand-drawn"}
@@ -123,16 +134,17 @@ def scaling_figure(rows: pd.DataFrame, path: Path) -> bool:
     points = scaling_points(rows)
     if not (points.groupby("family").train_layouts.nunique() >= 2).any():  # (no points at all: no reference)
         return False
-    reference = points[points.ingredient == "reference"].family.iloc[0]
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    reference, reference_encoder = rows[rows.ingredient == "reference"][["family", "encoder"]].iloc[0]
+    fig, axes = plt.subplots(1, 2, figsize=(14, 4.2))
     for (family, method, split), d in points[points.split.isin(["heldout", "drawn"])].groupby(
             ["family", "method", "split"], sort=False):
         d = d.sort_values(["train_layouts", "episodes_per_map"], kind="stable")
         most = d.groupby("train_layouts").episodes_per_map.transform("max") == d.episodes_per_map
         style = {"marker": "o" if split == "heldout" else "s", "linestyle": "-" if split == "heldout" else "--"}
         label = f"{_label(method)}, {SPLITS[split]}"
-        if family != reference:
-            style, label = {"marker": "^", "linestyle": "-."}, f"{label} ({family})"
+        if family != reference:  # (and its encoder where it is not the reference's)
+            encoder = "" if d.encoder.iloc[0] == reference_encoder else f"; {d.encoder.iloc[0]}"
+            style, label = {"marker": "^", "linestyle": "-."}, f"{label} ({family}{encoder})"
         for ax, column in zip(axes, ("steps_ratio", "success")):
             line, = ax.plot(d.train_layouts[most], d[column][most], label=label, **style)
             ax.plot(d.train_layouts[~most], d[column][~most], marker=style["marker"], linestyle="none",
@@ -153,9 +165,9 @@ def scaling_figure(rows: pd.DataFrame, path: Path) -> bool:
     axes[0].axhline(1.10, color="k", lw=0.8, ls=":")
     axes[1].axhline(0.95, color="k", lw=0.8, ls=":")
     axes[1].set_ylim(0, 1.05)
-    axes[1].legend(fontsize=8)
+    axes[1].legend(fontsize=7, loc="center left", bbox_to_anchor=(1.02, 0.5))  # (beside: the lines fill the axes)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")  # (the legend beside the axes)
     plt.close(fig)
     return True
 

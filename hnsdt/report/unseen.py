@@ -14,7 +14,7 @@ import numpy as np  # noqa: E402
 import pandas as pd  # noqa: E402
 
 from hnsdt.compose.params import Params  # noqa: E402
-from hnsdt.core.methods import PROPOSED  # noqa: E402
+from hnsdt.core.methods import METHODS, OUR_DTS, PROPOSED, REFERENCE  # noqa: E402
 from hnsdt.report.common import SPLIT_LABELS, fmt, label, methods_in, trained_seeds  # noqa: E402
 from hnsdt.report.paper_arm import DECOMPOSITION_HEAD, decomposition_cells  # noqa: E402
 
@@ -176,6 +176,51 @@ def experiment_contexts(params: Params, folder: Path, reference: Path | None = N
 
 
 OPERATOR_NAMES = {"move": "Move", "goto": "GoTo"}
+
+
+def executor_label(params: Params, method: str, run: str) -> str:
+    """A row of :func:`executors_table`: the method, what its planner hands it (nothing for a DT without a sub-goal)
+    and what it reads (the view, or the whole map through the planning module), the family it trained on, the run."""
+    from hnsdt.compose.config import layout_executor
+
+    g, m = params.generalisation, METHODS[method]
+    side = 2 * g.view_radius + 1
+    operators = OPERATOR_NAMES.get(layout_executor(params, method).operators, "?")
+    if m.training == "none":
+        handed, reads = operators, "the planner's way"
+    else:
+        handed = operators if m.condition == "subgoal" else "no sub-goal"
+        reads = "whole map + planning module" if g.whole_map else f"{side} × {side} view"
+    return f"{label(method)}: {handed}, {reads}; `{g.family}` ({run})"
+
+
+# The rows of :func:`executors_table`: the planner's own controllers (the main run's), then our transformers
+EXECUTOR_METHODS = (REFERENCE, PROPOSED, *(m for m in OUR_DTS if m != PROPOSED))
+
+
+def executors_table(params: Params, main: pd.DataFrame, experiments: list[dict]) -> str:
+    """Every way the unseen-layout runs execute a plan, in one table: the planner with hand-written controllers,
+    HNSDT handed Move or GoTo sub-goals reading the view or the whole map, the pure DT with no sub-goal (each run's
+    decision transformers and the main run's reference), per split success and steps / optimum (means over the
+    failure probabilities of the means over seeds). ``main``: the main run's summary; ``experiments``:
+    :func:`experiment_contexts`. A run of another family evaluates that family's own training and held-out maps."""
+    from hnsdt.compose.config import unseen_experiment
+
+    runs = [("main run", params, main)] + [(f"`{e['name']}`", unseen_experiment(params, e["name"]), e["summary"])
+                                           for e in experiments]
+    splits = list(dict.fromkeys(s for _, _, summ in runs for s in summ.split))
+    lines = ["| executor: sub-goals, what it reads; training family (run) | "
+             + " | ".join(SPLIT_LABELS.get(s, s) for s in splits) + " |", "|---|" + "---|" * len(splits)]
+    for run, p, summ in runs:
+        table = generalisation_table(summ)
+        for method in EXECUTOR_METHODS:
+            if method not in set(table.method) or (method == REFERENCE and run != "main run"):
+                continue
+            d = table[table.method == method].set_index("split")
+            lines.append(f"| {executor_label(p, method, run)} | " + " | ".join(
+                "–" if pd.isna(d.success.get(s)) else f"{fmt(d.success.get(s))} ({fmt(d.steps_ratio.get(s), '.2f')}×)"
+                for s in splits) + " |")
+    return "\n".join(lines)
 
 
 def operators_table(reference: pd.DataFrame, other: pd.DataFrame, operators: tuple[str, str]) -> list[str]:

@@ -22,7 +22,7 @@ from hnsdt.report.minigrid import minigrid_context
 from hnsdt.report.paper_arm import paper_arm_lines
 from hnsdt.report.tables import optimum_table, results_table, paper_target_lines, usage_lines
 from hnsdt.report.theorems import theorem_sections
-from hnsdt.report.unseen import experiment_contexts, generalisation_context
+from hnsdt.report.unseen import executors_table, experiment_contexts, generalisation_context
 
 
 def write_report(params: Params, results: Path, out: Path, lock_path: str | Path = "dvc.lock",
@@ -77,6 +77,8 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
                 raise FileNotFoundError(f"{ablations}: no measured variants (benchmarks/generalisation.py --record)")
             variants = ablation_context(ablations, tmp / "figures" / "scaling.png")
         further = experiment_contexts(params, experiments, generalisation) if experiments is not None and unseen else []
+        executors = (executors_table(params, pd.read_csv(generalisation / "summary.csv"), further) if further
+                     else "")
         envs, methods = sorted(set(summ.env)), sorted(set(summ.method))
         rev, digest = git_revision(), params_digest(params)
         recorded = episodes[episodes.rrd != ""]
@@ -98,7 +100,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             curves=curves, curve_figures=curve_figures,
             numbers=results_table(numbers), recorded=len(recorded),
             example_episode=recorded.episode_id.iloc[0] if len(recorded) else "",
-            generalisation=bool(unseen), **unseen, **variants, experiments=further,
+            generalisation=bool(unseen), **unseen, **variants, experiments=further, executors=executors,
             **({"minigrid_lines": []} | (minigrid_context(params, minigrid) if minigrid is not None else {})))
         (tmp / "report.md").write_text(text)
         theorem_data = {**theorem_data, "claims": claim_rows} if claim_rows else theorem_data
