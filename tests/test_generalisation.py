@@ -999,7 +999,16 @@ def test_an_offline_baselines_patience_stops_it_on_the_validation_layouts(tmp_pa
     else:  # never: no plateau (it ends at the epoch or step cap)
         assert not usage["stopped_early"]
     assert run.measure(model) == history[best]  # the kept weights are the best epoch's
+    # its own budget's held-out share: the plateau of the held-out episodes' loss instead, layouts or none
+    params["generalisation"]["budgets"]["lstm_hier"].update(epochs=2, validation=0.25)
+    (run,) = plan_unseen(validate(params), "lstm_hier", dataset)
+    assert run.measure is None and run.train_cfg.validation == 0.25
+    _, held, _ = train_run(run)  # (a quarter of the episodes out of training, their loss recorded per epoch)
+    assert "validation_loss" in held["usage"] and held["usage"]["dataset_episodes"] < usage["dataset_episodes"]
     params["generalisation"]["validation_layouts"] = 0
+    (run,) = plan_unseen(validate(params), "lstm_hier", dataset)
+    assert run.measure is None and run.train_cfg.validation == 0.25
+    params["generalisation"]["budgets"]["lstm_hier"].pop("validation")  # (baselines.lstm_hier's share: no choice)
     with pytest.raises(ParamsError, match=r"generalisation.budgets.lstm_hier.patience .*validation_layouts > 0"):
         plan_unseen(validate(params), "lstm_hier", dataset)
     # the paper protocol: the loss on held-out episodes (validation > 0, the default) or the greedy steps to the

@@ -284,12 +284,19 @@ def layout_network_configs(params: Params, method: str, seed: int, layout: Layou
 def _budget_on_validation_layouts(params: Params, method: str, train_cfg=None) -> bool:
     """Does ``method`` stop at the plateau of its steps to the exit on the validation layouts
     (:class:`StepsToExit`)? A DT with a ``train.validation`` entry does, an offline baseline with ``patience``
-    (``train_cfg``, its training config) does."""
+    (``train_cfg``, its training config) does, unless its own budget holds out episodes (:func:`_held_out_budget`)."""
     if params.need("generalisation").validation_layouts == 0:
         return False
     if lookup_method(method).stage == "train":
         return method in params.train.validation
-    return getattr(train_cfg, "patience", 0) > 0
+    return getattr(train_cfg, "patience", 0) > 0 and not _held_out_budget(params, method)
+
+
+def _held_out_budget(params: Params, method: str) -> bool:
+    """Does ``generalisation.budgets.<method>`` itself set ``validation`` > 0 — an offline baseline that holds that
+    share of its episodes out and stops at the plateau of their loss (the paper maps' rule), not of the validation
+    layouts' steps? (A share it inherits from ``baselines.<method>`` does not count: the budget chooses.)"""
+    return params.need("generalisation").budgets.get(method, {}).get("validation", 0) > 0
 
 
 def _budget(params: Params, method: str, train_cfg):
@@ -346,7 +353,8 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
                                          facts)
         if getattr(train_cfg, "validation", 0):  # (an offline baseline: every training episode trains)
             train_cfg = replace(train_cfg, validation=0.0)
-    elif lookup_method(method).stage != "train" and getattr(train_cfg, "patience", 0):  # (a DT's: train.validation)
+    elif (lookup_method(method).stage != "train" and getattr(train_cfg, "patience", 0)  # (a DT's: train.validation)
+          and not _held_out_budget(params, method)):
         raise params.error(f"generalisation.budgets.{method}.patience stops on the validation layouts: set "
                            "generalisation.validation_layouts > 0")
     return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data if online else source, facts,
