@@ -308,3 +308,25 @@ def test_option_critic_plays_each_episode_with_its_own_draws():
         play(model, env, [jobs[i]], max_steps=30, traces=alone)
         assert [step.action for step in alone[0]] == actions[i]
     assert actions[0] != actions[1]  # (the same world twice: another episode's own draws)
+
+
+def test_a_worlds_episodes_at_fail_prob_0_are_played_once_each_the_one_it_plays_alone(monkeypatch):
+    """At fail_prob 0 no action fails, so a greedy learner's episodes of one world are one episode: play makes one
+    game per world there (and one per job at other fail_probs), and each job gets the episode it plays alone. Fails
+    when worlds or failure probabilities are merged, or an episode lands on another job."""
+    import hnsdt.agents.minigrid_play as minigrid_play
+    from hnsdt.models.minigrid_nets import MiniGridRecurrent, MiniGridRecurrentConfig
+
+    torch.manual_seed(0)
+    model = MiniGridRecurrent(MiniGridRecurrentConfig(cell="gru", n_layers=1, hidden=32, embed=16)).eval()
+    env = "MiniGrid-DoorKey-5x5-v0"
+    jobs = [Job(10_000 + s, p, k) for s in range(3) for p in (0.0, 0.5) for k in range(3)]
+    made = []
+    game = minigrid_play._Game.__init__
+    monkeypatch.setattr(minigrid_play._Game, "__init__", lambda self, env_id, job, *rest: (
+        made.append(job), game(self, env_id, job, *rest))[1])
+    together = play(model, env, jobs, max_steps=25)
+    expected = [Job(10_000 + s, 0.0, 0) for s in range(3)] + [job for job in jobs if job.fail_prob == 0.5]
+    assert len(made) == len(expected) and set(made) == set(expected)
+    alone = [play(model, env, [job], max_steps=25)[0] for job in jobs]
+    assert together == alone

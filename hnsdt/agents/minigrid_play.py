@@ -13,7 +13,8 @@ from π_ω and β_ω by a generator of the episode's own: the world's seed and f
 
 Many episodes are played in lockstep (one row each of the transformer's key/value cache), so that each step is one
 forward pass for all of them; each episode ends when MiniGrid ends it (success, or its own step limit) or at
-``max_steps`` when given (counted a failure).
+``max_steps`` when given (counted a failure). At fail_prob 0 a world's episodes of a greedy learner are one
+episode, played once.
 """
 
 from __future__ import annotations
@@ -154,12 +155,30 @@ class _Options:
         return out
 
 
+def _same_episodes(model, jobs: list[Job], traces: dict) -> list[int]:
+    """For each job, the first job whose episode is certainly its own: at fail_prob 0 no action fails, and a
+    learner that acts greedily on what it has seen plays a world's episodes as one episode played again, whatever
+    their failure streams. Option-critic draws from each episode's own stream, and a traced job is played itself."""
+    if isinstance(model, MiniGridOptionCritic):
+        return list(range(len(jobs)))
+    first: dict[int, int] = {}
+    return [first.setdefault(job.seed, i) if job.fail_prob == 0 and i not in traces else i
+            for i, job in enumerate(jobs)]
+
+
 def play(model: MiniGridDT | MiniGridRecurrent | MiniGridActorCritic | MiniGridQNetwork | MiniGridOptionCritic,
          env_id: str, jobs: list[Job],
          target_return: float = 1.0, max_steps: int = 0, traces: dict[int, list[Step]] | None = None) -> list[Episode]:
     """Play every job with ``model`` (eval mode); the episodes in job order. ``traces``: job index -> a list that
     gets each step's :class:`Step` (MiniGrid's drawing of the world before it) and a closing frame."""
     traces = traces or {}
+    same = _same_episodes(model, jobs, traces)
+    if len(set(same)) < len(jobs):  # each distinct episode played once, in the order of its first job
+        kept = sorted(set(same))
+        at = {j: n for n, j in enumerate(kept)}
+        episodes = play(model, env_id, [jobs[j] for j in kept], target_return, max_steps,
+                        {at[j]: trace for j, trace in traces.items()})
+        return [episodes[at[j]] for j in same]
     subgoals = getattr(model.cfg, "condition", "") == "subgoal"
     games = [_Game(env_id, job, subgoals, i in traces) for i, job in enumerate(jobs)]
     done: list[Episode | None] = [None] * len(games)

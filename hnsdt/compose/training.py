@@ -267,8 +267,8 @@ def layout_network_configs(params: Params, method: str, seed: int, layout: Layou
         except ValueError as e:
             raise params.error(f"models.{g.family}: {e}") from None
         train_cfg = replace(ts.method_config(method, seed), symmetries=g.symmetries)
-        if _budget_on_validation_layouts(params, method):  # the measure acts on the validation layouts:
-            train_cfg = replace(train_cfg, validation=0.0)  # every training episode trains
+        if g.validation_layouts and _stops_on_validation_layouts(params, method):  # the measure acts on the
+            train_cfg = replace(train_cfg, validation=0.0)  # validation layouts: every training episode trains
         elif ts.measure.get(method, ("loss",))[0] != "loss":  # acting from held-out states needs one fixed map:
             train_cfg = replace(train_cfg, validation=0.0, epochs=ts.config.epochs)  # here, train.epochs
         return cfg, _budget(params, method, train_cfg)
@@ -281,12 +281,11 @@ def layout_network_configs(params: Params, method: str, seed: int, layout: Layou
         params, method, replace(bs.train, **turned))
 
 
-def _budget_on_validation_layouts(params: Params, method: str, train_cfg=None) -> bool:
+def _stops_on_validation_layouts(params: Params, method: str, train_cfg=None) -> bool:
     """Does ``method`` stop at the plateau of its steps to the exit on the validation layouts
-    (:class:`StepsToExit`)? A DT with a ``train.validation`` entry does, an offline baseline with ``patience``
-    (``train_cfg``, its training config) does, unless its own budget holds out episodes (:func:`_held_out_budget`)."""
-    if params.need("generalisation").validation_layouts == 0:
-        return False
+    (:class:`StepsToExit`), given some? A DT with a ``train.validation`` entry does, an offline baseline with
+    ``patience`` (``train_cfg``, its training config) does, unless its own budget holds out episodes
+    (:func:`_held_out_budget`)."""
     if lookup_method(method).stage == "train":
         return method in params.train.validation
     return getattr(train_cfg, "patience", 0) > 0 and not _held_out_budget(params, method)
@@ -346,15 +345,14 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
         raise ValueError(f"{method} learns from {wanted} episodes and {dataset} holds none; set "
                          "generalisation.random_episodes_per_layout > 0 (random walks) and collect again")
     measure = None
-    if _budget_on_validation_layouts(params, method, train_cfg):
+    if g.validation_layouts and _stops_on_validation_layouts(params, method, train_cfg):
         starts = g.validation_starts or (params.train.validation[method].starts if method in params.train.validation
                                          else train_cfg.starts)
         measure = StepsToExit.on_layouts(validation(), g.max_steps, starts, method, layout_executor(params, method),
                                          facts)
         if getattr(train_cfg, "validation", 0):  # (an offline baseline: every training episode trains)
             train_cfg = replace(train_cfg, validation=0.0)
-    elif (lookup_method(method).stage != "train" and getattr(train_cfg, "patience", 0)  # (a DT's: train.validation)
-          and not _held_out_budget(params, method)):
+    elif lookup_method(method).stage != "train" and _stops_on_validation_layouts(params, method, train_cfg):
         raise params.error(f"generalisation.budgets.{method}.patience stops on the validation layouts: set "
                            "generalisation.validation_layouts > 0")
     return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data if online else source, facts,

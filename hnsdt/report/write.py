@@ -63,11 +63,12 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
         inputs = {p: md5 for p, md5 in sorted(outs.items())  # (not the recordings: their bytes vary run to run)
                   if p.startswith(("data/", "models/", "generalisation/dataset", "generalisation/models/",
                                    "minigrid/")) and not p.endswith("recordings")}
-        unseen = {}
+        unseen, unseen_summary = {}, None
         if generalisation is not None:
             if not (generalisation / "summary.csv").is_file():
                 raise FileNotFoundError(f"{generalisation / 'summary.csv'}: no results of the unseen-layout "
                                         "experiment (run `dvc repro evaluate_generalisation`)")
+            unseen_summary = pd.read_csv(generalisation / "summary.csv")
             unseen = generalisation_context(params, generalisation, tmp / "figures" / "generalisation.png")
         variants = {"ablations": ""}  # (a part of the unseen-layout section: shown with it)
         if ablations is not None and unseen:
@@ -77,8 +78,7 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
                 raise FileNotFoundError(f"{ablations}: no measured variants (benchmarks/generalisation.py --record)")
             variants = ablation_context(ablations, tmp / "figures" / "scaling.png")
         further = experiment_contexts(params, experiments, generalisation) if experiments is not None and unseen else []
-        executors = (executors_table(params, pd.read_csv(generalisation / "summary.csv"), further) if further
-                     else "")
+        executors = executors_table(params, unseen_summary, further) if further else ""
         envs, methods = sorted(set(summ.env)), sorted(set(summ.method))
         rev, digest = git_revision(), params_digest(params)
         recorded = episodes[episodes.rrd != ""]
@@ -111,7 +111,6 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
         (tmp / "provenance.json").write_text(json.dumps(
             {"git_revision": rev, "params_digest": digest, "inputs": inputs}, indent=2, sort_keys=True) + "\n")
         if headline is not None:
-            unseen_summary = pd.read_csv(generalisation / "summary.csv") if generalisation is not None else None
             further_summaries = {e["name"]: e["summary"] for e in further}
             write_headline(headline_metrics(summ, unseen_summary, further_summaries), headline)
     return out / "report.md"
