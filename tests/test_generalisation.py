@@ -1108,6 +1108,20 @@ def test_a_further_experiment_is_a_params_block_of_the_keys_it_changes(tmp_path)
     assert not (tmp_path / "perfect").exists()
 
 
+def test_a_training_map_too_long_for_the_optimum_is_data_but_never_a_yardstick():
+    """The 808th maze of keydoor_mazes (a perfect maze) has a way too long for the optimum to finish every time
+    within 150 steps at fail_prob 0.3: as a training map that is never evaluated it is data (a plan is all it
+    needs), as an evaluated one it is refused, naming it."""
+    from hnsdt.compose import generalisation as gen
+
+    fine, long = (gen.Source("train", generate("keydoor_mazes", seed), 150) for seed in (0, 807))
+    gen.check_sources([fine, long], 0.3, yardsticks=1)
+    for sources, yardsticks in (([fine, long], 2), ([long, fine], 1), ([fine, long], None)):
+        with pytest.raises(LayoutError, match=r"keydoor_perfect-807: even the optimal policy succeeds only 0.897 "
+                                              r"of the time within 150 steps at fail_prob 0.3"):
+            gen.check_sources(sources, 0.3, yardsticks=yardsticks)
+
+
 def test_a_folder_of_drawn_maps_is_checked_with_one_line_naming_the_problem(tmp_path):
     from hnsdt.compose import generalisation as gen
     from hnsdt.cli import main

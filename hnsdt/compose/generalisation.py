@@ -111,18 +111,21 @@ def _same_flags(sources: list[Source], error) -> None:
                     f"{sources[0].layout.n_flags} (one network reads every split's flags)")
 
 
-def check_sources(sources: list[Source], fail_prob: float) -> None:
-    """Every layout usable at the highest failure probability, all with the same flags (one network), no two
-    of a split with one name; the refusal names every layout at fault."""
+def check_sources(sources: list[Source], fail_prob: float, yardsticks: int | None = None) -> None:
+    """Every layout usable at the highest failure probability (a plan from the start, and the exact optimum
+    finishing within the step limit), all with the same flags (one network), no two of a split with one name; the
+    refusal names every layout at fault. ``yardsticks``: only the first that many are measured against the optimum
+    (the evaluated ones); the others, training data alone, need a plan — a maze whose way is too long for the
+    optimum to finish every time within the limit at ``fail_prob`` still shows the way."""
     _same_flags(sources, lambda msg: ValueError(f"generalisation: {msg}"))
     names = [(s.split, s.name) for s in sources]
     twice = sorted({f"{name} ({split})" for split, name in names if names.count((split, name)) > 1})
     if twice:
         raise ValueError(f"generalisation: two layouts of a split share the name {', '.join(twice)}")
     bad = []
-    for src in sources:
+    for i, src in enumerate(sources):
         try:
-            check_usable(src.layout, src.max_steps, fail_prob)
+            check_usable(src.layout, src.max_steps, fail_prob, 0.99 if yardsticks is None or i < yardsticks else 0.0)
         except LayoutError as e:
             bad.append(f"{e} ({src.split})")
     if bad:

@@ -17,7 +17,7 @@ def collect_unseen(params: Params, out: Path, progress: bool = True, compute=Non
 
     g, cfg = params.need("generalisation"), layout_collect_config(params)
     train = gen.training_layouts(params)
-    gen.check_sources(train, max(cfg.fail_probs))
+    gen.check_sources(train, max(cfg.fail_probs), yardsticks=g.evaluated_train_layouts)  # (the rest: data)
     root = collect_on_layouts(cfg, [s.layout for s in train], out, f"local/generated-{g.family}", g.view_radius,
                               g.family, progress, compute or compute_settings(params))
     print(f"wrote LeRobot dataset {root} (card: {root / 'README.md'})")
