@@ -344,15 +344,15 @@ def plan_layout_runs(params: Params, method: str, dataset: str | Path, layouts: 
     if not online and wanted and not np.isin(frames.policy, wanted).any():
         raise ValueError(f"{method} learns from {wanted} episodes and {dataset} holds none; set "
                          "generalisation.random_episodes_per_layout > 0 (random walks) and collect again")
-    measure = None
-    if g.validation_layouts and _stops_on_validation_layouts(params, method, train_cfg):
+    measure, stops = None, _stops_on_validation_layouts(params, method, train_cfg)
+    if g.validation_layouts and stops:
         starts = g.validation_starts or (params.train.validation[method].starts if method in params.train.validation
                                          else train_cfg.starts)
         measure = StepsToExit.on_layouts(validation(), g.max_steps, starts, method, layout_executor(params, method),
                                          facts)
         if getattr(train_cfg, "validation", 0):  # (an offline baseline: every training episode trains)
             train_cfg = replace(train_cfg, validation=0.0)
-    elif lookup_method(method).stage != "train" and _stops_on_validation_layouts(params, method, train_cfg):
+    elif stops and lookup_method(method).stage != "train":  # (a DT falls back on its held-out episodes)
         raise params.error(f"generalisation.budgets.{method}.patience stops on the validation layouts: set "
                            "generalisation.validation_layouts > 0")
     return [TrainTask(method, seed, net_cfg, replace(train_cfg, seed=seed), data if online else source, facts,
