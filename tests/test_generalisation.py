@@ -1161,6 +1161,38 @@ def test_a_folder_of_drawn_maps_is_checked_with_one_line_naming_the_problem(tmp_
     assert code == 2 and not (tmp_path / "r").exists()
 
 
+def test_your_drawn_maps_take_the_experiments_own_step_limit_and_a_map_too_long_for_it_names_the_option(tmp_path):
+    """`--drawn FOLDER --experiment NAME`: the maps get that experiment's own step limit (the GoTo experiment's
+    long detours need more than the main one's), `--drawn-max-steps` overrides it, 250 where the experiment draws
+    no maps; a map even the optimum cannot finish within the limit is one line naming the option, nothing
+    written."""
+    from argparse import Namespace
+
+    from hnsdt.cli.commands import DRAWN_MAX_STEPS, drawn_max_steps
+
+    params = _tiny_generalisation_params(tmp_path)
+    params["unseen_experiments"] = {"long": {"drawn": {"folder": str(tmp_path / "drawn"), "max_steps": 600}},
+                                    "none": {"drawn": None}}
+    base = validate(params)
+    limit = lambda experiment, given=None: drawn_max_steps(Namespace(experiment=experiment,  # noqa: E731
+                                                                     drawn_max_steps=given), base)
+    assert (limit("long"), limit("none"), limit(None), limit("unseen")) == (
+        600, DRAWN_MAX_STEPS, params["generalisation"]["drawn"]["max_steps"], params["generalisation"]["drawn"][
+            "max_steps"])
+    assert limit("long", 321) == 321 and limit(None, 321) == 321
+    (tmp_path / "mine").mkdir()  # the optimum needs 462 steps on it at fail_prob 0.3
+    (tmp_path / "mine/spiral.txt").write_text((REPO / "layouts/drawn_later/spiral_17x19.txt").read_text())
+    (tmp_path / "params.yaml").write_text(yaml.safe_dump(params, sort_keys=False))
+    out = hnsdt_cli("generalisation", "evaluate", "--drawn", tmp_path / "mine", "--splits", "drawn", "--out", "res",
+                    cwd=tmp_path)
+    assert out.returncode == 2 and len(out.stderr.strip().splitlines()) == 1, out.stderr
+    highest = max(params["evaluate"]["fail_probs"])
+    assert out.stderr.strip().endswith(f"layout spiral: even the optimal policy succeeds only 0.000 of the time "
+                                       f"within {limit(None)} steps at fail_prob {highest:g} (need 0.99) (drawn) — "
+                                       f"--drawn-max-steps (now {limit(None)}) sets the limit on your maps")
+    assert not (tmp_path / "res").exists()
+
+
 def test_the_report_says_per_unseen_split_whether_hnsdt_meets_the_target_and_by_how_much():
     import pandas as pd
 

@@ -4,7 +4,10 @@
 from __future__ import annotations
 
 import json
+from contextlib import contextmanager
 from pathlib import Path
+
+DRAWN_MAX_STEPS = 250  # the episode limit on a user's --drawn maps where the experiment draws none of its own
 
 
 def _resolve_env(args) -> tuple[str, object, int]:
@@ -224,8 +227,34 @@ def _params_with_drawn(args):
     if not getattr(args, "drawn", None):
         return params
     section = f"unseen_experiments.{experiment}" if experiment else "generalisation"
-    drawn = [f"{section}.drawn=" + json.dumps({"folder": args.drawn, "max_steps": args.drawn_max_steps})]
+    drawn = [f"{section}.drawn=" + json.dumps({"folder": args.drawn, "max_steps": drawn_max_steps(args, params)})]
     return load_params(args.params, drawn)
+
+
+def drawn_max_steps(args, params) -> int:
+    """``--drawn-max-steps``, or the step limit of the experiment's own drawn maps (its long detours may need more
+    than the main experiment's), or :data:`DRAWN_MAX_STEPS` where it has none."""
+    from hnsdt.compose.config import unseen_experiment
+
+    if args.drawn_max_steps is not None:
+        return args.drawn_max_steps
+    experiment = args.experiment if args.experiment not in (None, "paper", "unseen") else None
+    drawn = unseen_experiment(params, experiment).need("generalisation").drawn
+    return drawn.max_steps if drawn is not None else DRAWN_MAX_STEPS
+
+
+@contextmanager
+def _step_limit_hint(args, params):
+    """A map of ``--drawn`` that even the optimum cannot finish within the limit: say which option raises it."""
+    from hnsdt.envs.layout import LayoutError
+
+    try:
+        yield
+    except LayoutError as e:
+        if not args.drawn or "(drawn)" not in str(e) or "within" not in str(e):
+            raise
+        raise LayoutError(f"{e} — --drawn-max-steps (now {drawn_max_steps(args, params)}) sets the limit on your "
+                          "maps") from e
 
 
 def _write_recording(files: dict[str, bytes], out: Path) -> Path:
@@ -277,5 +306,6 @@ def cmd_generalisation(args) -> None:
     from hnsdt.stages.evaluate_unseen import evaluate_unseen
 
     ran = Path("generalisation", *(("experiments", args.experiment) if args.experiment else ()))
-    evaluate_unseen(params, Path(args.models or ran / "models"), Path(args.out), compute, progress=not args.quiet,
-                    splits=args.splits, methods=args.methods)
+    with _step_limit_hint(args, params):
+        evaluate_unseen(params, Path(args.models or ran / "models"), Path(args.out), compute, progress=not args.quiet,
+                        splits=args.splits, methods=args.methods)

@@ -14,8 +14,8 @@ def _drawn_arguments(p: argparse.ArgumentParser, action: str) -> None:
     p.add_argument("--drawn", help=f"{action}: a folder of layout files (*.txt, and those of its folders: maps of "
                    "any shape with the family's keys and doors), the split `drawn` in place of generalisation.drawn's "
                    "folder")
-    p.add_argument("--drawn-max-steps", type=int, default=250, help=f"{action}: the episode step limit on the "
-                   "--drawn maps (default: 250)")
+    p.add_argument("--drawn-max-steps", type=int, help=f"{action}: the episode step limit on the --drawn maps "
+                   "(default: the experiment's own, generalisation.drawn.max_steps; 250 where it has none)")
 
 
 def _run_arguments(p: argparse.ArgumentParser, func) -> None:
