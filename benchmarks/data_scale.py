@@ -85,6 +85,8 @@ def main() -> None:
     raw = yaml.safe_load((ROOT / args.params).read_text())
     hnsdt = str(Path(sys.executable).with_name("hnsdt"))
     gib = 2 ** 30
+    from hnsdt.core.provenance import cpu_name
+
     print(f"CPU: {cpu_name()}; params {args.params} with {args.set or 'no changes'}; HNSDT seed {args.seed}\n")
     print("| maps | stage | frames | seconds | s / 1,000 maps | CPU-s | peak RSS, largest process | peak RSS, all "
           "processes |")
@@ -122,21 +124,6 @@ def main() -> None:
                     extra = f" ({usage.get('epochs', '?')} epochs, {usage.get('gradient_steps', '?')} steps)"
                 print(f"| {n:,} | {stage}{extra} | {frames:,} | {m['seconds']:.0f} | {1000 * m['seconds'] / n:.0f} | "
                       f"{m['cpu']:.0f} | {m['rss'] / gib:.2f} GiB | {m['tree_rss'] / gib:.2f} GiB |", flush=True)
-
-
-def field(name: str) -> str:
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
-        if line.split(":")[0].strip() == name:
-            return line.split(":", 1)[1].strip()
-    return "?"
-
-
-def cpu_name() -> str:
-    for line in Path("/proc/cpuinfo").read_text().splitlines():
-        if line.startswith("model name"):
-            return (line.split(":", 1)[1].strip() + f" (family {field('cpu family')}, model {field('model')}), "
-                    f"{psutil.cpu_count()} cores")
-    return "unknown CPU"
 
 
 if __name__ == "__main__":

@@ -205,20 +205,9 @@ def folder_digest(folder: Path) -> str:
     return h.hexdigest()[:16]
 
 
-def cpu_name() -> str:
-    """The CPU's model name and whether it has AVX-512 (stage times differ 2-3x between such machines)."""
-    try:
-        info = Path("/proc/cpuinfo").read_text()
-    except OSError:
-        return "unknown"
-    model = next((line.split(":", 1)[1].strip() for line in info.splitlines() if line.startswith("model name")), "?")
-    return f"{model}, {len([line for line in info.splitlines() if line.startswith('processor')])} cores" + (
-        ", AVX-512" if "avx512f" in info else ", no AVX-512")
-
-
 def variant_rows(args, params, table: pd.DataFrame, best: dict, rounds: dict, dataset_digest: str, seconds: float) -> pd.DataFrame:
     """The benchmark's table as rows of hnsdt.evaluation.ablations' file."""
-    from hnsdt.core.provenance import git_revision, params_digest
+    from hnsdt.core.provenance import cpu_name, git_revision, params_digest
 
     g = params.generalisation
     side = 2 * g.view_radius + 1

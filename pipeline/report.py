@@ -4,6 +4,7 @@ metrics (hnsdt.stages.report).
 Usage: python pipeline/report.py --results results --generalisation generalisation/results --out report
        --headline metrics/headline --ablations benchmarks/results/generalisation.csv
        --experiments generalisation/experiments --minigrid minigrid
+       --minigrid-learners benchmarks/results/minigrid_learners.csv
 """
 
 import argparse
@@ -19,9 +20,10 @@ from hnsdt.stages.report import report  # noqa: E402
 
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    for name in ("--results", "--generalisation", "--out", "--headline", "--ablations", "--experiments", "--minigrid"):
+    for name in ("--results", "--generalisation", "--out", "--headline", "--ablations", "--experiments", "--minigrid",
+                 "--minigrid-learners"):
         parser.add_argument(name, required=True, type=Path)
     args = parser.parse_args()
     sys.exit(run(report, results=args.results, out=args.out, generalisation=args.generalisation,
                         headline=args.headline, ablations=args.ablations, experiments=args.experiments,
-                        minigrid=args.minigrid))
+                        minigrid=args.minigrid, minigrid_learners=args.minigrid_learners))

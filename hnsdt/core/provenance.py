@@ -27,3 +27,19 @@ def git_revision(cwd: str | Path = ".") -> str:
 def params_digest(params) -> str:
     """16 hex digits of the canonical JSON of the params file as written (:attr:`hnsdt.compose.params.Params.raw`)."""
     return hashlib.sha256(json.dumps(params.raw, sort_keys=True).encode()).hexdigest()[:16]
+
+
+def cpu_name() -> str:
+    """The CPU as a timing needs it: model name, family and model (one "AMD EPYC" name covers CPUs 2-3x apart), the
+    cores and whether it has AVX-512."""
+    try:
+        info = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return "unknown CPU"
+    fields = {}
+    for line in info.splitlines():
+        key, _, value = line.partition(":")
+        fields.setdefault(key.strip(), value.strip())
+    cores = sum(line.startswith("processor") for line in info.splitlines())
+    return (f"{fields.get('model name', '?')} (family {fields.get('cpu family', '?')}, model {fields.get('model', '?')}),"
+            f" {cores} cores, " + ("AVX-512" if "avx512f" in fields.get("flags", "").split() else "no AVX-512"))

@@ -28,9 +28,10 @@ from hnsdt.report.unseen import executors_table, experiment_contexts, generalisa
 def write_report(params: Params, results: Path, out: Path, lock_path: str | Path = "dvc.lock",
                  generalisation: Path | None = None, headline: Path | None = None,
                  ablations: Path | None = None, experiments: Path | None = None,
-                 minigrid: Path | None = None) -> Path:
+                 minigrid: Path | None = None, minigrid_learners: Path | None = None) -> Path:
     """``minigrid``: the folder of MiniGrid's own worlds (``minigrid``/NAME/reference; its section is left out
-    without one); ``generalisation``: the unseen-layout experiment's results folder (its section is left out without one);
+    without one); ``minigrid_learners``: the MiniGrid learners measured outside the default run
+    (:mod:`hnsdt.evaluation.minigrid_learners`; their rows are left out without one); ``generalisation``: the unseen-layout experiment's results folder (its section is left out without one);
     ``experiments``: the folder of the further ones (``unseen_experiments``: each in ``experiments``/NAME);
     ``headline``: the folder to write :func:`headline_metrics` into (one JSON file per split); ``ablations``: the
     measured variants of that experiment (:mod:`hnsdt.evaluation.ablations`; its table and scaling figure are left
@@ -101,7 +102,8 @@ def write_report(params: Params, results: Path, out: Path, lock_path: str | Path
             numbers=results_table(numbers), recorded=len(recorded),
             example_episode=recorded.episode_id.iloc[0] if len(recorded) else "",
             generalisation=bool(unseen), **unseen, **variants, experiments=further, executors=executors,
-            **({"minigrid_lines": []} | (minigrid_context(params, minigrid) if minigrid is not None else {})))
+            **({"minigrid_lines": []} | (minigrid_context(params, minigrid, minigrid_learners)
+                                         if minigrid is not None else {})))
         (tmp / "report.md").write_text(text)
         theorem_data = {**theorem_data, "claims": claim_rows} if claim_rows else theorem_data
         if paper_claim_rows and arms:
