@@ -100,3 +100,9 @@ def test_the_report_sets_the_recorded_learners_beside_the_default_runs_marked_an
                                             "revision `abc123def456`, 1,045 s on AMD EPYC"]
     assert plain["minigrid_measured"] == [] and minigrid_context(params, folder, tmp_path / "none.csv")[
         "minigrid_learned"] == plain["minigrid_learned"]
+    minigrid_learners.record(path, minigrid_learners.stage_rows(run, ["dqn"], 100.0, command="python c.py", cpu="x",
+                                                                seconds=7))  # (one method measured again, apart)
+    assert minigrid_context(params, folder, path)["minigrid_measured"] == [
+        f"{ENV}: Options (option-critic) — `python b.py --world doorkey8`, revision `abc123def456`, 1,045 s on "
+        "AMD EPYC",
+        f"{ENV}: DQN — `python c.py`, revision `abc123def456`, 7 s on x"]

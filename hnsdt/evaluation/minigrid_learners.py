@@ -1,9 +1,9 @@
 """What each MiniGrid learner used and where it stopped, and the learners measured outside the default run.
 
-DQN and option-critic learn in MiniGrid's worlds too, but cost ≈ 16 minutes a world on 2 cores, so the default run
-leaves them out (docs/minigrid.md, "Cost"). ``python benchmarks/minigrid_learn_runs.py --world W --methods dqn
-options --stage OUT --record FILE`` runs the stage's own function for them — the default's worlds, training and
-test seeds, test episodes and plateau rule — and adds its rows to ``FILE`` (kept in git:
+DQN and option-critic learn in MiniGrid's worlds too, but cost ≈ 15–30 minutes a world on 2 cores (by the CPU),
+so the default run leaves them out (docs/minigrid.md, "Cost"). ``python benchmarks/minigrid_learn_runs.py --world W
+--methods dqn options --stage OUT --record FILE`` runs the stage's own function for them — the default's worlds,
+training and test seeds, test episodes and plateau rule — and adds its rows to ``FILE`` (kept in git:
 ``benchmarks/results/minigrid_learners.csv``): per method and fail_prob the stage's ``summary.csv`` row, what the
 seeds used and where they stopped (:func:`learner_budget`), and what made them — the command, the git revision and
 params digest the stage ran with, the dataset's md5, the CPU and the seconds. ``dvc repro`` does not rerun them;

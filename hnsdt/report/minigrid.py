@@ -60,15 +60,16 @@ def minigrid_context(params: Params, folder: Path, measured: Path | None = None)
         budgets += [_budget_line(env.id, METHODS[m].label + MEASURED_MARK, r)
                     for m, r in {r["method"]: r for r in outside if r["env"] == env.id}.items()]
     learn = section.learn
-    made = {}  # per world of the outside rows: what made them
+    made = {}  # per world and run of the outside rows: the methods it measured
     for r in outside:
-        made.setdefault(r["env"], (r, []))[1].append(METHODS[r["method"]].label)
+        made.setdefault((r["env"], r["command"], r["revision"], r["seconds"], r["cpu"]), []).append(
+            METHODS[r["method"]].label)
     return dict(minigrid_lines=lines, minigrid_worlds=worlds, minigrid_seeds=section.test_seeds.seeds,
                 minigrid_episodes=section.episodes, minigrid_learned=learned, minigrid_budgets=budgets,
                 minigrid_target=target, minigrid_measured_file=measured,
-                minigrid_measured=[f"{env_id}: {', '.join(dict.fromkeys(labels))} — `{r['command']}`, revision "
-                                   f"`{r['revision']}`, {r['seconds']:,.0f} s on {r['cpu']}"
-                                   for env_id, (r, labels) in made.items()],
+                minigrid_measured=[f"{env_id}: {', '.join(dict.fromkeys(labels))} — `{command}`, revision "
+                                   f"`{revision}`, {seconds:,.0f} s on {cpu}"
+                                   for (env_id, command, revision, seconds, cpu), labels in made.items()],
                 minigrid_learn=None if learn is None else dict(
                     seeds=len(learn.seeds), validation=learn.validation_seeds.count,
                     train=section.collect.train_seeds.count, max_epochs=learn.max_epochs, patience=learn.patience,
