@@ -106,3 +106,7 @@ def test_the_report_sets_the_recorded_learners_beside_the_default_runs_marked_an
         f"{ENV}: Options (option-critic) — `python b.py --world doorkey8`, revision `abc123def456`, 1,045 s on "
         "AMD EPYC",
         f"{ENV}: DQN — `python c.py`, revision `abc123def456`, 7 s on x"]
+    minigrid_learners.record(path, minigrid_learners.stage_rows(run, ["dqn"], 100.0, command="python c.py", cpu="x",
+                                                                seconds=float("nan")))  # (recorded, its time unknown)
+    assert minigrid_context(params, folder, path)["minigrid_measured"][1:] == [
+        f"{ENV}: DQN — `python c.py`, revision `abc123def456`, on x"]  # (one line for its rows, no "nan s")

@@ -217,12 +217,19 @@ def _replay_dataset(args) -> None:
         _open_in_rerun([out])
 
 
+def _further_experiment(args) -> str | None:
+    """``--experiment`` when it names one of ``unseen_experiments`` (None: the main unseen-layout experiment)."""
+    from hnsdt.stages.replay import PAPER, UNSEEN
+
+    return args.experiment if args.experiment not in (None, PAPER, UNSEEN) else None
+
+
 def _params_with_drawn(args):
     """The params, with ``--drawn FOLDER`` (a folder of the user's maps) in place of the experiment's drawn maps."""
     from hnsdt.compose.config import load_params, unseen_experiment
 
     params = load_params(args.params)
-    experiment = args.experiment if args.experiment not in (None, "paper", "unseen") else None
+    experiment = _further_experiment(args)
     unseen_experiment(params, experiment)  # (an unknown name: one line, before the override)
     if not getattr(args, "drawn", None):
         return params
@@ -238,7 +245,7 @@ def drawn_max_steps(args, params) -> int:
 
     if args.drawn_max_steps is not None:
         return args.drawn_max_steps
-    experiment = args.experiment if args.experiment not in (None, "paper", "unseen") else None
+    experiment = _further_experiment(args)
     drawn = unseen_experiment(params, experiment).need("generalisation").drawn
     return drawn.max_steps if drawn is not None else DRAWN_MAX_STEPS
 

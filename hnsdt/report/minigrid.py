@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pandas as pd
+
 from hnsdt.compose.params import Params
 from hnsdt.core.methods import METHODS, PROPOSED
 from hnsdt.evaluation.minigrid import BOT, OPTIMUM, SYMBOLIC, read_csv
@@ -60,16 +62,15 @@ def minigrid_context(params: Params, folder: Path, measured: Path | None = None)
         budgets += [_budget_line(env.id, METHODS[m].label + MEASURED_MARK, r)
                     for m, r in {r["method"]: r for r in outside if r["env"] == env.id}.items()]
     learn = section.learn
-    made = {}  # per world and run of the outside rows: the methods it measured
+    made = {}  # per world and run of the outside rows (its first row: what made it): the methods it measured
     for r in outside:
-        made.setdefault((r["env"], r["command"], r["revision"], r["seconds"], r["cpu"]), []).append(
-            METHODS[r["method"]].label)
+        made.setdefault((r["env"], r["command"], r["revision"]), (r, []))[1].append(METHODS[r["method"]].label)
     return dict(minigrid_lines=lines, minigrid_worlds=worlds, minigrid_seeds=section.test_seeds.seeds,
                 minigrid_episodes=section.episodes, minigrid_learned=learned, minigrid_budgets=budgets,
                 minigrid_target=target, minigrid_measured_file=measured,
                 minigrid_measured=[f"{env_id}: {', '.join(dict.fromkeys(labels))} — `{command}`, revision "
-                                   f"`{revision}`, {seconds:,.0f} s on {cpu}"
-                                   for (env_id, command, revision, seconds, cpu), labels in made.items()],
+                                   f"`{revision}`, " + ("" if pd.isna(r["seconds"]) else f"{r['seconds']:,.0f} s ")
+                                   + f"on {r['cpu']}" for (env_id, command, revision), (r, labels) in made.items()],
                 minigrid_learn=None if learn is None else dict(
                     seeds=len(learn.seeds), validation=learn.validation_seeds.count,
                     train=section.collect.train_seeds.count, max_epochs=learn.max_epochs, patience=learn.patience,
